@@ -1,0 +1,10 @@
+#include "scanclean/command.h"
+
+namespace scanclean::app {
+
+std::vector<Command>& command_registry() {
+  static std::vector<Command> registry;
+  return registry;
+}
+
+}  // namespace scanclean::app

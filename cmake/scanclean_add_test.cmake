@@ -1,0 +1,22 @@
+# scanclean_add_test(NAME <module> SOURCES ... DEPS ... [LABELS ...] [RPATH dir] [TIMEOUT s])
+# One GoogleTest binary per module: scanclean_<module>_tests, discovered test by test and labelled.
+include(GoogleTest)
+function(scanclean_add_test)
+  cmake_parse_arguments(ARG "" "NAME;RPATH;TIMEOUT" "SOURCES;DEPS;LABELS" ${ARGN})
+  set(target scanclean_${ARG_NAME}_tests)
+  add_executable(${target} ${ARG_SOURCES})
+  target_link_libraries(${target} PRIVATE ${ARG_DEPS} scanclean_test_support GTest::gtest_main)
+  scanclean_set_warnings(${target})
+  if(ARG_RPATH)
+    set_target_properties(${target} PROPERTIES BUILD_RPATH "${ARG_RPATH}")
+  endif()
+  if(NOT ARG_LABELS)
+    set(ARG_LABELS ${ARG_NAME})
+  endif()
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 600)
+  endif()
+  gtest_discover_tests(${target}
+    DISCOVERY_MODE PRE_TEST
+    PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT})
+endfunction()

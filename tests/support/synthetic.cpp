@@ -1,0 +1,58 @@
+#include "support/synthetic.h"
+
+#include <cmath>
+#include <random>
+
+namespace scanclean::test {
+
+PointCloud noisy_plane(std::size_t n, double size, double sigma, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-size / 2, size / 2);
+  std::normal_distribution<double> g(0.0, sigma);
+  PointCloud c;
+  c.positions.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = u(rng), y = u(rng);
+    c.positions.emplace_back(x, y, sigma > 0 ? g(rng) : 0.0);
+  }
+  c.normals.assign(n, Eigen::Vector3f(0, 0, 1));
+  return c;
+}
+
+PointCloud noisy_sphere(std::size_t n, double radius, double sigma, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, sigma);
+  PointCloud c;
+  c.positions.reserve(n);
+  c.normals.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    Eigen::Vector3d d(g(rng), g(rng), g(rng));
+    d.normalize();
+    Eigen::Vector3d p = radius * d;
+    if (sigma > 0) p += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    c.positions.push_back(p);
+    c.normals.push_back(d.cast<float>());
+  }
+  return c;
+}
+
+std::vector<std::size_t> add_uniform_outliers(PointCloud& cloud, std::size_t count, double lo,
+                                              double hi, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(lo, hi);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::vector<std::size_t> added;
+  for (std::size_t k = 0; k < count; ++k) {
+    added.push_back(cloud.positions.size());
+    cloud.positions.emplace_back(u(rng), u(rng), u(rng));
+    if (!cloud.normals.empty()) {
+      Eigen::Vector3f n(g(rng), g(rng), g(rng));
+      cloud.normals.push_back(n.normalized());
+    }
+    if (!cloud.confidences.empty()) cloud.confidences.push_back(1.0f);
+  }
+  return added;
+}
+
+}  // namespace scanclean::test

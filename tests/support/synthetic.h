@@ -1,0 +1,25 @@
+#pragma once
+//! Named, seeded synthetic fixtures (STYLE.md practice 14). Every generator takes an explicit
+//! seed so that each test is reproducible run after run.
+
+#include <cstdint>
+#include <vector>
+
+#include "scanclean/core/point_cloud.h"
+
+namespace scanclean::test {
+
+//! n points uniform on the square [-size/2, size/2]^2 in the plane z = 0, with Gaussian noise of
+//! standard deviation sigma along z. Normals (0,0,1).
+PointCloud noisy_plane(std::size_t n, double size, double sigma, std::uint32_t seed);
+
+//! n points uniform on a sphere of the given radius about the origin, with isotropic Gaussian
+//! noise of standard deviation sigma. Outward normals of the clean surface.
+PointCloud noisy_sphere(std::size_t n, double radius, double sigma, std::uint32_t seed);
+
+//! Appends `count` points uniform in the box [lo, hi]^3 to `cloud` (normals, if present, get
+//! random unit vectors). Returns the indices of the added points.
+std::vector<std::size_t> add_uniform_outliers(PointCloud& cloud, std::size_t count, double lo,
+                                              double hi, std::uint32_t seed);
+
+}  // namespace scanclean::test
