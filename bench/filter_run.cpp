@@ -1,0 +1,93 @@
+#include "filter_run.h"
+
+#include <chrono>
+#include <sstream>
+
+#include "scanclean/core/errors.h"
+
+#ifdef SCANCLEAN_BENCH_HAVE_FILTER
+#include "scanclean/filter/robust_filter.h"
+#endif
+
+namespace scanclean::bench {
+
+std::string FilterSettings::describe() const {
+  std::ostringstream s;
+  s << "defaults";
+  if (adaptive) s << ", scale=adaptive k=" << k_adaptive;
+  s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
+  return s.str();
+}
+
+FilterRun run_robust_filter(const std::vector<Eigen::Vector3d>& input,
+                            const FilterSettings& settings) {
+  PointCloud cloud;
+  cloud.positions = input;
+  return run_robust_filter(cloud, settings);
+}
+
+#ifdef SCANCLEAN_BENCH_HAVE_FILTER
+
+bool filter_available() {
+  return true;
+}
+
+FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& settings) {
+  FilterOptions options;
+  if (!settings.merge) options.merge_eps = 0;
+  if (settings.adaptive) {
+    options.scale = ScaleMode::kAdaptive;
+    options.k_adaptive = settings.k_adaptive;
+  }
+  options.threads = settings.threads;
+  const auto t0 = std::chrono::steady_clock::now();
+  FilterResult r = robust_filter(input, options);
+  const auto t1 = std::chrono::steady_clock::now();
+  FilterRun run;
+  run.seconds_wall = std::chrono::duration<double>(t1 - t0).count();
+  run.kept.assign(input.size(), 0);
+  const Attribute* src = r.cloud.find_attribute("source_index");
+  if (src == nullptr) throw std::logic_error("robust_filter output lacks source_index");
+  if (settings.merge) {
+    // With merging an output point stands for several inputs: every input not listed among the
+    // outliers is represented.
+    run.kept.assign(input.size(), 1);
+    const Attribute* osrc = r.outliers.find_attribute("source_index");
+    if (osrc == nullptr) throw std::logic_error("robust_filter outliers lack source_index");
+    for (double v : osrc->values) run.kept[static_cast<std::size_t>(v)] = 0;
+  } else {
+    for (double v : src->values) run.kept[static_cast<std::size_t>(v)] = 1;
+  }
+  const FilterStats& s = r.stats;
+  run.h = s.h;
+  run.noise_sigma = s.noise_sigma;
+  run.mean_iterations = s.mean_iterations;
+  run.p95_iterations = s.p95_iterations;
+  run.unsupported = s.unsupported;
+  run.low_density = s.low_density;
+  run.small_components = s.small_components;
+  run.merged = s.merged;
+  run.not_converged = s.not_converged;
+  run.s_scale = s.seconds_scale;
+  run.s_kernels = s.seconds_kernels;
+  run.s_projection = s.seconds_projection;
+  run.s_clustering = s.seconds_clustering;
+  run.s_outliers = s.seconds_outliers;
+  run.s_total = s.seconds_total;
+  run.cloud = std::move(r.cloud);
+  return run;
+}
+
+#else
+
+bool filter_available() {
+  return false;
+}
+
+FilterRun run_robust_filter(const PointCloud&, const FilterSettings&) {
+  throw UnavailableError("scanclean_bench was built without the filter module (robust_filter)");
+}
+
+#endif
+
+}  // namespace scanclean::bench

@@ -1,0 +1,41 @@
+#pragma once
+//! \file filter_run.h
+//! The benchmark's view of scanclean::robust_filter (compiled against the filter module only
+//! when it is part of the build; otherwise filter_available() is false and run_robust_filter
+//! throws UnavailableError).
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "scanclean/core/point_cloud.h"
+
+namespace scanclean::bench {
+
+struct FilterSettings {
+  bool merge = false;     //!< false: merge_eps = 0 (protocol mode, counts match the input)
+  bool adaptive = false;  //!< ScaleMode::kAdaptive with k_adaptive
+  int k_adaptive = 48;
+  int threads = 0;  //!< FilterOptions::threads (0 = all cores)
+  std::string describe() const;
+};
+
+struct FilterRun {
+  PointCloud cloud;                //!< filtered points (with the filter's attributes)
+  std::vector<std::uint8_t> kept;  //!< per input point: 1 = represented in the output
+  double seconds_wall = 0;         //!< measured around the call
+  // FilterStats, copied so that callers need not see the filter header.
+  double h = 0, noise_sigma = 0, mean_iterations = 0, p95_iterations = 0;
+  std::size_t unsupported = 0, low_density = 0, small_components = 0, merged = 0, not_converged = 0;
+  double s_scale = 0, s_kernels = 0, s_projection = 0, s_clustering = 0, s_outliers = 0,
+         s_total = 0;
+};
+
+bool filter_available();
+FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& settings);
+//! Convenience: positions only.
+FilterRun run_robust_filter(const std::vector<Eigen::Vector3d>& input,
+                            const FilterSettings& settings);
+
+}  // namespace scanclean::bench

@@ -1,0 +1,47 @@
+#pragma once
+//! \file shapes.h
+//! Ground-truth shapes of the evaluation protocol (ALGORITHM.md, "Evaluation protocol"): each is
+//! normalised to the unit sphere (bounding-box centre at the origin, largest radius 1), can be
+//! sampled uniformly by area with a seeded generator and answers the exact unsigned distance of a
+//! point to its surface. Units: the normalised unit (the bounding sphere has radius 1).
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "rng.h"
+
+namespace scanclean::bench {
+
+class Shape {
+ public:
+  virtual ~Shape() = default;
+  virtual std::string name() const = 0;
+  //! n points distributed uniformly by surface area (deterministic for a given rng state).
+  virtual std::vector<Eigen::Vector3d> sample(std::size_t n, Rng& rng) const = 0;
+  //! Exact unsigned distance from p to the surface. Thread-safe.
+  virtual double distance(const Eigen::Vector3d& p) const = 0;
+  //! Axis-aligned bounding box of the surface.
+  virtual Eigen::AlignedBox3d box() const = 0;
+  //! Surface area.
+  virtual double area() const = 0;
+};
+
+//! Unit sphere.
+std::unique_ptr<Shape> make_sphere();
+//! Torus around z with tube radius 0.3 and centre-line radius 0.7 (outer radius 1).
+std::unique_ptr<Shape> make_torus();
+//! Rounded box: the Minkowski sum of a box with half extents proportional to (0.5, 0.35, 0.2)
+//! and a ball of radius proportional to 0.15, scaled so that its corners lie on the unit sphere.
+std::unique_ptr<Shape> make_rounded_box();
+//! A triangle mesh read with io's read_triangle_mesh and normalised (vertices' bounding-box centre
+//! to the origin, farthest vertex at radius 1); distances by eval::MeshDistance.
+//! \throw UnavailableError if the benchmark was built without the io/eval modules;
+//!        InputError/IoError from the reader.
+std::unique_ptr<Shape> make_mesh_shape(const std::filesystem::path& ply, const std::string& name);
+
+}  // namespace scanclean::bench

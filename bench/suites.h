@@ -1,0 +1,53 @@
+#pragma once
+//! \file suites.h
+//! The benchmark's sections. Each appends its tables to the context (and prints them at once).
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "report.h"
+#include "shapes.h"
+
+namespace scanclean::bench {
+
+struct Context {
+  bool quick = false;
+  int threads = 0;  //!< 0 = all cores
+  std::uint64_t seed = 1;
+  std::filesystem::path self_exe;    //!< this program (speed runs re-execute it)
+  std::filesystem::path bunny_mesh;  //!< recordings/bunny/bun_zipper.ply
+  std::filesystem::path bunny_conf;  //!< ../shared/data/stanford_bunny/data/bun.conf
+  std::vector<Table> tables;
+  std::vector<std::string> messages;  //!< skipped parts and other remarks for the report
+  void add(Table t);
+  void message(const std::string& m);
+};
+
+//! Settings of the peer methods for one noise level (sigma in normalised units).
+struct PeerSettings {
+  unsigned jet_k = 0;
+  unsigned bilateral_k = 0;
+  double bilateral_sharpness = 0;
+  int bilateral_iterations = 0;
+  double wlop_select_percentage = 0;
+  unsigned wlop_iterations = 0;
+  int pca_k = 0;
+};
+PeerSettings peer_settings(double sigma, std::size_t n);
+
+//! The protocol's shapes (quick: the sphere only). The bunny is added when the build has io/eval
+//! and the mesh file exists; otherwise a message says why not.
+std::vector<std::unique_ptr<Shape>> protocol_shapes(Context& ctx);
+
+void run_quality_suite(Context& ctx);
+void run_outlier_suite(Context& ctx);
+void run_speed_suite(Context& ctx);
+void run_real_suite(Context& ctx);
+
+//! Entry point of a speed measurement child process (see suite_speed.cpp). Returns the exit code.
+int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads);
+
+}  // namespace scanclean::bench
