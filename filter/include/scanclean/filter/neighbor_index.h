@@ -1,0 +1,130 @@
+#pragma once
+//! \file neighbor_index.h
+//! Exact fixed-radius and k-nearest-neighbour queries on a 3D point set, used by the robust
+//! filter. Points are held in float (callers pass coordinates relative to a local origin, so
+//! that float keeps sub-micrometre resolution near the data). A uniform hash grid answers
+//! queries whose radius spans few cells; larger radii and k-nearest queries go to a k-d tree
+//! (nanoflann, hidden behind a PImpl) that is built on first use.
+
+#include <Eigen/Core>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <utility>
+#include <vector>
+
+namespace scanclean {
+
+class NeighborIndex {
+ public:
+  //! Builds the index. `points` in metres (any local frame); `cell` > 0 is the grid cell edge in
+  //! metres (choose about the typical query radius). The cell is enlarged if the extent would
+  //! need more than 2^21 cells per axis. Non-finite coordinates are not allowed (assert).
+  //! Construction runs in the caller's TBB arena; the result does not depend on the thread count.
+  NeighborIndex(std::vector<Eigen::Vector3f> points, double cell);
+  ~NeighborIndex();
+  NeighborIndex(const NeighborIndex&) = delete;
+  NeighborIndex& operator=(const NeighborIndex&) = delete;
+
+  std::size_t size() const { return pts_.size(); }
+  double cell() const { return cell_; }
+  //! Point indices (into the constructor's array) in grid order: Morton order of the cells,
+  //! ascending index inside a cell. A cache-friendly processing order.
+  const std::vector<std::uint32_t>& order() const { return ids_; }
+  //! The point with the given original index.
+  const Eigen::Vector3f& point(std::uint32_t i) const { return pts_[inv_[i]]; }
+
+  //! Calls f(index, squared_distance) for every point p with |p - q| < r (strict). The visiting
+  //! order is deterministic (depends on q and r only). Thread-safe (const).
+  template <class F>
+  void for_each_within(const Eigen::Vector3f& q, float r, F&& f) const {
+    visit<false>(q, r, f);
+  }
+  //! As for_each_within, but passes the grid slot (position in order()) instead of the index.
+  template <class F>
+  void for_each_slot_within(const Eigen::Vector3f& q, float r, F&& f) const {
+    visit<true>(q, r, f);
+  }
+  //! The point in grid slot s (that is, point(order()[s])).
+  const Eigen::Vector3f& slot_point(std::size_t s) const { return pts_[s]; }
+  //! Grid slot of original index i.
+  std::uint32_t slot_of(std::uint32_t i) const { return inv_[i]; }
+
+  //! The k nearest points to q (including a point equal to q), as (squared distance, index),
+  //! sorted by distance then index. Fewer if the set has fewer points. Thread-safe (const).
+  void knn(const Eigen::Vector3f& q, std::size_t k,
+           std::vector<std::pair<float, std::uint32_t>>& out) const;
+
+ private:
+  template <bool kSlots, class F>
+  void visit(const Eigen::Vector3f& q, float r, F& f) const;
+  static constexpr int kMaxGridSpan = 4;  // cells per axis scanned by the grid path
+  void tree_within(const Eigen::Vector3f& q, float r,
+                   std::vector<std::pair<std::uint32_t, float>>& out) const;
+  std::int64_t find_cell(std::uint64_t key) const;  // cell number or -1
+
+  std::vector<Eigen::Vector3f> pts_;       // sorted in grid order
+  std::vector<std::uint32_t> ids_;         // original index of pts_[s]
+  std::vector<std::uint32_t> inv_;         // sorted slot of original index i
+  std::vector<std::uint32_t> cell_begin_;  // per occupied cell, +1 sentinel
+  std::vector<std::uint64_t> hash_keys_;   // open addressing, ~0 = empty
+  std::vector<std::uint32_t> hash_cells_;
+  std::uint64_t hash_mask_ = 0;
+  Eigen::Vector3f lo_ = Eigen::Vector3f::Zero();
+  double cell_ = 1;
+  bool grid_ = true;
+  float inv_cell_ = 1;
+  std::int32_t dims_[3] = {1, 1, 1};
+  struct Tree;
+  const Tree& tree() const;  // built on first use, thread-safe
+  mutable std::once_flag tree_once_;
+  mutable std::unique_ptr<Tree> tree_;
+};
+
+namespace detail {
+inline std::uint64_t cell_key(std::int32_t x, std::int32_t y, std::int32_t z) {
+  return static_cast<std::uint64_t>(x) | (static_cast<std::uint64_t>(y) << 21) |
+         (static_cast<std::uint64_t>(z) << 42);
+}
+}  // namespace detail
+
+template <bool kSlots, class F>
+void NeighborIndex::visit(const Eigen::Vector3f& q, float r, F& f) const {
+  if (pts_.empty() || !(r > 0)) return;
+  const float r2 = r * r;
+  std::int32_t lo[3], hi[3];
+  bool grid = grid_;
+  for (int a = 0; a < 3 && grid; ++a) {
+    const float l = std::floor((q[a] - r - lo_[a]) * inv_cell_);
+    const float h = std::floor((q[a] + r - lo_[a]) * inv_cell_);
+    if (!(h - l < static_cast<float>(kMaxGridSpan))) grid = false;
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (!grid) break;
+    const float l = std::floor((q[a] - r - lo_[a]) * inv_cell_);
+    const float h = std::floor((q[a] + r - lo_[a]) * inv_cell_);
+    if (h < 0 || l > static_cast<float>(dims_[a] - 1)) return;  // entirely outside
+    lo[a] = static_cast<std::int32_t>(std::max(l, 0.0f));
+    hi[a] = static_cast<std::int32_t>(std::min(h, static_cast<float>(dims_[a] - 1)));
+  }
+  if (!grid) {
+    std::vector<std::pair<std::uint32_t, float>> found;
+    tree_within(q, r, found);
+    for (const auto& [i, d2] : found) f(kSlots ? inv_[i] : i, d2);
+    return;
+  }
+  for (std::int32_t z = lo[2]; z <= hi[2]; ++z)
+    for (std::int32_t y = lo[1]; y <= hi[1]; ++y)
+      for (std::int32_t x = lo[0]; x <= hi[0]; ++x) {
+        const std::int64_t c = find_cell(detail::cell_key(x, y, z));
+        if (c < 0) continue;
+        for (std::uint32_t s = cell_begin_[c], e = cell_begin_[c + 1]; s < e; ++s) {
+          const float d2 = (pts_[s] - q).squaredNorm();
+          if (d2 < r2) f(kSlots ? s : ids_[s], d2);
+        }
+      }
+}
+
+}  // namespace scanclean

@@ -1,0 +1,112 @@
+#pragma once
+//! \file robust_filter.h
+//! The robust filter of Schall, Belyaev, Seidel (2005), "Robust Filtering of Noisy Scattered
+//! Point Data", as specified in docs ALGORITHM.md: anisotropic likelihood kernels from weighted
+//! PCA, a mean-shift-like projection of every point onto a maximum of the likelihood, greedy
+//! clustering of the converged points and density-threshold outlier removal.
+//!
+//! Known limits: two sheets closer than about 0.5 h collapse into one (at gaps of h or more
+//! they stay apart); sharp creases are rounded; curvature bias grows with h^2 / R; near open
+//! boundaries the error is about 1.6x higher; misregistered scan layers closer than h merge.
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "scanclean/core/point_cloud.h"
+
+namespace scanclean {
+
+//! How the kernel size h is chosen.
+enum class ScaleMode {
+  kAuto,      //!< h0 = median K_h-th neighbour distance, then h = max(h0, 3 sigma)
+  kFixed,     //!< FilterOptions::h
+  kAdaptive,  //!< per point h_i = distance to the k_adaptive-th nearest neighbour
+};
+
+//! The projection step.
+enum class UpdateMode {
+  kNormal,  //!< x <- x - (m . n_bar) n_bar, stop when |m . n_bar| < tolerance h (default)
+  kVector,  //!< the paper's literal x <- x - m, stop when |m| < tolerance h
+};
+
+//! Options of robust_filter(). Lengths in metres. Checked by validate().
+struct FilterOptions {
+  ScaleMode scale = ScaleMode::kAuto;
+  double h = 0;                   //!< kernel size for kFixed (metres, > 0)
+  int k_h = 48;                   //!< neighbour rank for the automatic h (kAuto), [2, 1000]
+  int k_adaptive = 48;            //!< neighbour rank for per-point h_i (kAdaptive), [2, 1000]
+  int k_min = 8;                  //!< fewer neighbours within h_i: no kernel, [3, 1000]
+  double truncation_sigma = 3.0;  //!< Phi cut at this many sigma, (0, 10]
+  double slab = 1.0;              //!< keep kernel j only if |d_j| < slab h_j, (0, 10]
+  double eigen_floor = 0.05;      //!< eigenvalues floored at (eigen_floor h_i)^2, (0, 1]
+  double tolerance = 1e-4;        //!< convergence: step < tolerance h_i, (0, 0.1]
+  int max_iterations = 20;        //!< iteration cap, [1, 255]
+  UpdateMode update = UpdateMode::kNormal;
+  int passes = 1;         //!< 2 = rebuild kernels from the first output and project again, [1, 2]
+  double merge_eps = -1;  //!< < 0: 0.25 x mean spacing; 0: no merging; > 0: metres
+  double tau = 0.1;       //!< drop points whose density < tau x median density, [0, 1]
+  bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
+  std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
+  bool use_sensor_normals = true;        //!< input normals (non-zero ones) replace PCA normals
+  bool use_confidences = true;           //!< input confidences are the kernel weights w_i
+  int threads = 0;  //!< 0 = all cores, else [1, 1024]; output identical for any
+  //! Optional progress report (phase name, fraction in [0, 1]); always called from the thread
+  //! that called robust_filter().
+  std::function<void(const std::string& phase, double fraction)> progress;
+};
+
+//! Throws OptionError naming the option, the value and the valid range.
+void validate(const FilterOptions& options);
+
+//! Bits of the "flags" attribute.
+enum FilterFlags : std::uint8_t {
+  kFlagUnsupported = 1,   //!< no kernel supported the point (dropped)
+  kFlagOutlier = 2,       //!< removed by the density test or as a small component
+  kFlagNotConverged = 4,  //!< iteration cap reached
+};
+
+struct FilterStats {
+  std::size_t points_in = 0;
+  std::size_t points_out = 0;
+  std::size_t unsupported = 0;       //!< input points dropped: no support
+  std::size_t low_density = 0;       //!< input points dropped by the density test
+  std::size_t small_components = 0;  //!< input points dropped with small components
+  std::size_t merged = 0;            //!< input points merged into another output point
+  std::size_t kernels = 0;           //!< points that got a kernel (>= k_min neighbours)
+  double h = 0;                      //!< kernel size (metres); kAdaptive: median h_i
+  double h_min = 0, h_max = 0;       //!< range of h_i (equal to h unless kAdaptive)
+  double h0 = 0;            //!< kAuto: the neighbour-distance median before the noise check
+  double mean_spacing = 0;  //!< s = h / sqrt(K / pi) (metres)
+  double noise_sigma = 0;   //!< kAuto: median sqrt(lambda_3) at h0 (metres)
+  double merge_eps = 0;     //!< merging distance used (metres)
+  double mean_iterations = 0;
+  double p95_iterations = 0;
+  std::size_t not_converged = 0;
+  double seconds_scale = 0, seconds_kernels = 0, seconds_projection = 0, seconds_clustering = 0,
+         seconds_outliers = 0, seconds_total = 0;
+  std::size_t peak_rss_bytes = 0;  //!< process peak resident memory after the run (Linux)
+  int threads = 0;                 //!< worker threads used
+};
+
+//! cloud: the filtered points (positions; normals = oriented surface normals; colours,
+//! intensities and confidences of the representative input point when the input has them;
+//! attributes "likelihood" float32, "iterations" uint8, "flags" uint8, "merge_count" uint32,
+//! "source_index" uint32). outliers: every dropped input point at its input position, with the
+//! input's optional arrays and the attributes "flags" (uint8) and "source_index" (uint32).
+//! Invariant: sum of merge_count over cloud + outliers.size() == input.size().
+struct FilterResult {
+  PointCloud cloud;
+  PointCloud outliers;
+  FilterStats stats;
+};
+
+//! Filters `input` (metres). Input normals (non-zero) are sensor normals, input confidences
+//! the weights w_i in [0, 1]. Deterministic: bit-identical output for any options.threads.
+//! An empty input gives an empty result. \throw OptionError (validate), InputError when a
+//! coordinate is not finite or a confidence is outside [0, 1] (names the point index).
+//! Thread-safe (no shared state); runs its parallel work in its own TBB arena.
+FilterResult robust_filter(const PointCloud& input, const FilterOptions& options = {});
+
+}  // namespace scanclean

@@ -1,0 +1,213 @@
+#include "candidate_eval.h"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+// The 8-wide helpers below return vectors by value; they are always inlined into functions
+// compiled for AVX2 (see step_avx2), so the ABI note GCC gives for them does not apply.
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace scanclean::detail {
+
+void CandidateBuffer::push(unsigned kernel_slot, const float v[15]) {
+  if (count + kCandidatePad > f[0].size()) {
+    const std::size_t cap = std::max<std::size_t>(64, 2 * (count + kCandidatePad));
+    for (auto& a : f) a.resize(cap);
+    d.resize(cap);
+    slot.resize(cap);
+  }
+  for (std::size_t k = 0; k < 15; ++k) f[k][count] = v[k];
+  slot[count] = kernel_slot;
+  ++count;
+}
+
+void CandidateBuffer::finish() {
+  if (f[0].size() < kCandidatePad) {
+    for (auto& a : f) a.resize(64);
+    d.resize(64);
+    slot.resize(64);
+  }
+  padded = (count + kCandidatePad - 1) / kCandidatePad * kCandidatePad;
+  for (std::size_t j = count; j < padded; ++j) {
+    for (std::size_t k = 0; k < kFields; ++k) f[k][j] = 0;
+    f[kSlab2][j] = -1;  // never kept
+  }
+}
+
+namespace {
+
+constexpr float kLog2e = 1.44269504088896341f;
+
+template <class V, class VI>
+[[gnu::always_inline]] inline V load(const float* p) {
+  V v;
+  std::memcpy(&v, p, sizeof(V));
+  return v;
+}
+
+template <class V, class VI>
+[[gnu::always_inline]] inline V vexp(V a) {
+  // 2^t with t = a log2(e) = n + f, n = round(t), f in [-0.5, 0.5]; Cephes exp2f polynomial.
+  V t = a * kLog2e;
+  V tr = t + 0.5f;
+  VI n = __builtin_convertvector(tr, VI);  // toward zero
+  V nf = __builtin_convertvector(n, V);
+  n += (nf > tr);  // floor: -1 where truncation rounded up
+  nf = __builtin_convertvector(n, V);
+  const V f = t - nf;
+  V p = 1.535336188319500e-4f * f + 1.339887440266574e-3f;
+  p = p * f + 9.618437357674640e-3f;
+  p = p * f + 5.550332471162809e-2f;
+  p = p * f + 2.402264791363012e-1f;
+  p = p * f + 6.931472028550421e-1f;
+  p = p * f + 1.0f;
+  VI bits = (n + 127) << 23;
+  V scale;
+  std::memcpy(&scale, &bits, sizeof(V));
+  return p * scale;
+}
+
+template <class V, class VI>
+[[gnu::always_inline]] inline bool step_impl(CandidateBuffer& b, const float x[3], float t2,
+                                             StepSums& out) {
+  constexpr int W = sizeof(V) / sizeof(float);
+  const float inf = std::numeric_limits<float>::infinity();
+  const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
+  V vmin = V{} + inf;
+  const std::size_t n = b.padded;
+  float* e_out = b.f[CandidateBuffer::kE].data();
+  float* d_out = b.d.data();
+  for (std::size_t j = 0; j < n; j += W) {
+    const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
+    const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
+    const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
+    const V e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
+                load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
+                load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
+                (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
+                 load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
+                 load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
+    const V d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
+                dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
+                dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    const VI keep = (e < t2) & (d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]));
+    const V em = keep ? e : V{} + inf;
+    vmin = em < vmin ? em : vmin;
+    std::memcpy(e_out + j, &em, sizeof(V));
+    std::memcpy(d_out + j, &d, sizeof(V));
+  }
+  float emin = inf;
+  for (int l = 0; l < W; ++l) emin = std::min(emin, vmin[l]);
+  if (!(emin < inf)) return false;
+  V as{}, adx{}, ady{}, adz{}, anx{}, any{}, anz{};
+  const V emv = V{} + emin;
+  for (std::size_t j = 0; j < n; j += W) {
+    const V em = load<V, VI>(e_out + j);
+    const VI kept = em < inf;
+    V a = (emv - em) * 0.5f;
+    a = a < -80.0f ? V{} - 80.0f : a;
+    V om = load<V, VI>(&b.f[CandidateBuffer::kW][j]) * vexp<V, VI>(a);
+    om = kept ? om : V{};
+    const V d = load<V, VI>(d_out + j);
+    const V nx = load<V, VI>(&b.f[CandidateBuffer::kNx][j]);
+    const V ny = load<V, VI>(&b.f[CandidateBuffer::kNy][j]);
+    const V nz = load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    const V od = om * d;
+    as += om;
+    adx += od * nx;
+    ady += od * ny;
+    adz += od * nz;
+    anx += om * nx;
+    any += om * ny;
+    anz += om * nz;
+  }
+  out = StepSums{};
+  out.e_min = emin;
+  for (int l = 0; l < W; ++l) {
+    out.s += as[l];
+    out.dn[0] += adx[l];
+    out.dn[1] += ady[l];
+    out.dn[2] += adz[l];
+    out.n[0] += anx[l];
+    out.n[1] += any[l];
+    out.n[2] += anz[l];
+  }
+  return true;
+}
+
+template <class V, class VI>
+[[gnu::always_inline]] inline double likelihood_impl(CandidateBuffer& b, const float x[3],
+                                                     float t2) {
+  constexpr int W = sizeof(V) / sizeof(float);
+  const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
+  V acc{};
+  for (std::size_t j = 0; j < b.padded; j += W) {
+    const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
+    const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
+    const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
+    const V e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
+                load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
+                load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
+                (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
+                 load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
+                 load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
+    const V d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
+                dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
+                dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    const V slab = load<V, VI>(&b.f[CandidateBuffer::kH2][j]) - d * d;
+    const VI keep = (e < t2) & (slab > 0.0f);
+    V a = e * -0.5f;
+    a = a < -80.0f ? V{} - 80.0f : a;
+    const V term = load<V, VI>(&b.f[CandidateBuffer::kW][j]) * vexp<V, VI>(a) * slab;
+    acc += keep ? term : V{};
+  }
+  double sum = 0;
+  for (int l = 0; l < W; ++l) sum += acc[l];
+  return sum;
+}
+
+typedef float V4 __attribute__((vector_size(16)));
+typedef int VI4 __attribute__((vector_size(16)));
+typedef float V8 __attribute__((vector_size(32)));
+typedef int VI8 __attribute__((vector_size(32)));
+
+[[gnu::target("avx2,fma")]] bool step_avx2(CandidateBuffer& b, const float x[3], float t2,
+                                           StepSums& out) {
+  return step_impl<V8, VI8>(b, x, t2, out);
+}
+[[gnu::target("avx2,fma")]] double likelihood_avx2(CandidateBuffer& b, const float x[3], float t2) {
+  return likelihood_impl<V8, VI8>(b, x, t2);
+}
+bool step_sse(CandidateBuffer& b, const float x[3], float t2, StepSums& out) {
+  return step_impl<V4, VI4>(b, x, t2, out);
+}
+double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
+  return likelihood_impl<V4, VI4>(b, x, t2);
+}
+
+bool have_avx2() {
+  static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return yes;
+}
+
+}  // namespace
+
+bool step_sums(CandidateBuffer& buffer, const float x[3], float t2, StepSums& out) {
+  return have_avx2() ? step_avx2(buffer, x, t2, out) : step_sse(buffer, x, t2, out);
+}
+
+double likelihood(CandidateBuffer& buffer, const float x[3], float t2) {
+  return have_avx2() ? likelihood_avx2(buffer, x, t2) : likelihood_sse(buffer, x, t2);
+}
+
+float fast_exp(float a) {
+  V4 v = V4{} + a;
+  return vexp<V4, VI4>(v)[0];
+}
+
+const char* simd_path() {
+  return have_avx2() ? "avx2+fma" : "sse2";
+}
+
+}  // namespace scanclean::detail

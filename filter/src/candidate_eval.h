@@ -1,0 +1,64 @@
+#pragma once
+//! Internal: the projection's inner loops over a point's candidate kernels, in float SIMD
+//! (8-wide AVX2+FMA when the CPU has it, else 4-wide SSE2), with a fast exp. Candidates are held
+//! relative to a local origin (the point where they were gathered) so float keeps full
+//! resolution. Per-lane partial sums are combined in double in a fixed order, so results do not
+//! depend on threads (they may differ between the AVX2 and SSE2 paths).
+
+#include <cstddef>
+#include <vector>
+
+namespace scanclean::detail {
+
+//! Struct of arrays, padded with inert entries to a multiple of kCandidatePad.
+struct CandidateBuffer {
+  static constexpr std::size_t kFields = 16;
+  enum Field {
+    kCx,
+    kCy,
+    kCz,  // centre minus local origin (metres)
+    kQ00,
+    kQ11,
+    kQ22,  // S^-1 diagonal
+    kQ01,
+    kQ02,
+    kQ12,  // 2 x S^-1 off-diagonal
+    kNx,
+    kNy,
+    kNz,  // kernel normal (flipped to agree with the reference normal)
+    kSlab2,
+    kH2,
+    kW,  // (slab h_j)^2, h_j^2, w_j
+    kE   // scratch: masked Mahalanobis e_j
+  };
+  std::vector<float> f[kFields];
+  std::vector<float> d;  // scratch: signed distances d_j
+  std::size_t count = 0;
+  std::size_t padded = 0;
+  std::vector<unsigned> slot;  // kernel slot of each candidate
+
+  void clear() { count = 0; }
+  void push(unsigned kernel_slot, const float v[15]);
+  void finish();  // pads to a multiple of kCandidatePad with inert entries
+};
+
+constexpr std::size_t kCandidatePad = 8;
+
+struct StepSums {
+  double s = 0;              // sum omega
+  double dn[3] = {0, 0, 0};  // sum omega d n
+  double n[3] = {0, 0, 0};   // sum omega n
+  float e_min = 0;
+};
+
+//! One iteration's sums at x (relative to the local origin). Returns false if no kernel is kept
+//! (e_j < t2 and d_j^2 < slab2_j). Fills buffer.f[kE] and buffer.d.
+bool step_sums(CandidateBuffer& buffer, const float x[3], float t2, StepSums& out);
+//! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
+double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
+//! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error ~1e-7).
+float fast_exp(float a);
+//! "avx2+fma" or "sse2": the path chosen at run time.
+const char* simd_path();
+
+}  // namespace scanclean::detail

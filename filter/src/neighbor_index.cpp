@@ -1,0 +1,196 @@
+#include "scanclean/filter/neighbor_index.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cassert>
+#include <limits>
+#include <mutex>
+#include <nanoflann.hpp>
+
+namespace scanclean {
+namespace {
+
+// Spreads the low 21 bits of v so that there are two zero bits between consecutive bits.
+std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+
+std::uint64_t morton(std::int32_t x, std::int32_t y, std::int32_t z) {
+  return spread_bits(static_cast<std::uint64_t>(x)) |
+         (spread_bits(static_cast<std::uint64_t>(y)) << 1) |
+         (spread_bits(static_cast<std::uint64_t>(z)) << 2);
+}
+
+std::uint64_t hash_of(std::uint64_t key) {
+  return key * 0x9E3779B97F4A7C15ULL;
+}
+
+constexpr std::uint64_t kEmpty = ~0ULL;
+
+}  // namespace
+
+struct NeighborIndex::Tree {
+  struct Adaptor {
+    const std::vector<Eigen::Vector3f>* pts;
+    std::size_t kdtree_get_point_count() const { return pts->size(); }
+    float kdtree_get_pt(std::size_t i, std::size_t d) const { return (*pts)[i][d]; }
+    template <class B>
+    bool kdtree_get_bbox(B&) const {
+      return false;
+    }
+  };
+  using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Adaptor>,
+                                                     Adaptor, 3, std::uint32_t>;
+  explicit Tree(const std::vector<Eigen::Vector3f>* pts)
+      : adaptor{pts}, tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {
+    tree.buildIndex();
+  }
+  Adaptor adaptor;
+  KdTree tree;
+};
+
+NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
+  assert(cell >= 0);
+  const std::size_t n = points.size();
+  cell_ = cell;
+  if (n == 0) {
+    cell_begin_.push_back(0);
+    return;
+  }
+  if (cell <= 0) {  // tree only
+    grid_ = false;
+    pts_ = std::move(points);
+    ids_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) ids_[i] = static_cast<std::uint32_t>(i);
+    inv_ = ids_;
+    return;
+  }
+  Eigen::Vector3f lo = points[0], hi = points[0];
+  for (const auto& p : points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const double max_extent = (hi - lo).cast<double>().maxCoeff();
+  constexpr double kMaxCells = (1 << 21) - 2;
+  if (max_extent / cell > kMaxCells) cell = max_extent / kMaxCells * (1 + 1e-6);
+  // Widen the box a little so that rounding never puts a point outside.
+  lo_ = lo - Eigen::Vector3f::Constant(static_cast<float>(cell) * 0.5f);
+  cell_ = cell;
+  inv_cell_ = static_cast<float>(1.0 / cell);
+  for (int a = 0; a < 3; ++a)
+    dims_[a] = std::min<std::int32_t>(
+        static_cast<std::int32_t>(std::floor((hi[a] - lo_[a]) * inv_cell_)) + 2, (1 << 21) - 1);
+
+  auto coords = [&](const Eigen::Vector3f& p, int a) {
+    const float c = std::floor((p[a] - lo_[a]) * inv_cell_);
+    return static_cast<std::int32_t>(std::clamp(c, 0.0f, static_cast<float>(dims_[a] - 1)));
+  };
+  struct Entry {
+    std::uint64_t morton;
+    std::uint64_t key;
+    std::uint32_t id;
+  };
+  std::vector<Entry> entries(n);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+          const auto& p = points[i];
+          const std::int32_t x = coords(p, 0), y = coords(p, 1), z = coords(p, 2);
+          entries[i] = {morton(x, y, z), detail::cell_key(x, y, z), static_cast<std::uint32_t>(i)};
+        }
+      });
+  tbb::parallel_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+    return a.morton != b.morton ? a.morton < b.morton : a.id < b.id;
+  });
+  pts_.resize(n);
+  ids_.resize(n);
+  inv_.resize(n);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t s = r.begin(); s < r.end(); ++s) {
+                        ids_[s] = entries[s].id;
+                        inv_[entries[s].id] = static_cast<std::uint32_t>(s);
+                        pts_[s] = points[entries[s].id];
+                      }
+                    });
+  std::vector<std::uint64_t> keys;
+  for (std::size_t s = 0; s < n; ++s) {
+    if (s == 0 || entries[s].key != entries[s - 1].key) {
+      cell_begin_.push_back(static_cast<std::uint32_t>(s));
+      keys.push_back(entries[s].key);
+    }
+  }
+  cell_begin_.push_back(static_cast<std::uint32_t>(n));
+  std::size_t cap = 16;
+  while (cap < 2 * keys.size()) cap *= 2;
+  hash_mask_ = cap - 1;
+  hash_keys_.assign(cap, kEmpty);
+  hash_cells_.assign(cap, 0);
+  for (std::size_t c = 0; c < keys.size(); ++c) {
+    std::uint64_t h = hash_of(keys[c]) >> 20;
+    while (true) {
+      const std::uint64_t slot = h & hash_mask_;
+      if (hash_keys_[slot] == kEmpty) {
+        hash_keys_[slot] = keys[c];
+        hash_cells_[slot] = static_cast<std::uint32_t>(c);
+        break;
+      }
+      ++h;
+    }
+  }
+}
+
+NeighborIndex::~NeighborIndex() = default;
+
+std::int64_t NeighborIndex::find_cell(std::uint64_t key) const {
+  std::uint64_t h = hash_of(key) >> 20;
+  while (true) {
+    const std::uint64_t slot = h & hash_mask_;
+    const std::uint64_t k = hash_keys_[slot];
+    if (k == key) return hash_cells_[slot];
+    if (k == kEmpty) return -1;
+    ++h;
+  }
+}
+
+const NeighborIndex::Tree& NeighborIndex::tree() const {
+  std::call_once(tree_once_, [this] { tree_ = std::make_unique<Tree>(&pts_); });
+  return *tree_;
+}
+
+void NeighborIndex::tree_within(const Eigen::Vector3f& q, float r,
+                                std::vector<std::pair<std::uint32_t, float>>& out) const {
+  out.clear();
+  nanoflann::SearchParams params(32, 0, false);
+  tree().tree.radiusSearch(q.data(), r * r, out, params);
+  // nanoflann's radius test is <=; keep the strict one, report original indices, fixed order.
+  std::size_t k = 0;
+  for (const auto& [s, d2] : out)
+    if (d2 < r * r) out[k++] = {s, d2};
+  out.resize(k);
+  std::sort(out.begin(), out.end());
+  for (auto& e : out) e.first = ids_[e.first];
+}
+
+void NeighborIndex::knn(const Eigen::Vector3f& q, std::size_t k,
+                        std::vector<std::pair<float, std::uint32_t>>& out) const {
+  k = std::min(k, pts_.size());
+  thread_local std::vector<std::uint32_t> idx;
+  thread_local std::vector<float> d2;
+  idx.resize(k);
+  d2.resize(k);
+  const std::size_t found = tree().tree.knnSearch(q.data(), k, idx.data(), d2.data());
+  out.resize(found);
+  for (std::size_t i = 0; i < found; ++i) out[i] = {d2[i], ids_[idx[i]]};
+  std::sort(out.begin(), out.end());
+}
+
+}  // namespace scanclean

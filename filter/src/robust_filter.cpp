@@ -1,0 +1,973 @@
+#include "scanclean/filter/robust_filter.h"
+
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <numeric>
+#include <sstream>
+
+#include "candidate_eval.h"
+#include "scanclean/core/errors.h"
+#include "scanclean/filter/neighbor_index.h"
+
+namespace scanclean {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+constexpr std::size_t kGrain = 256;
+
+// Runs f(i) for i in [0, n) in parallel. Per-index work is independent, so the result does not
+// depend on how TBB splits the range.
+template <class F>
+void parallel_each(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) f(i);
+                    });
+}
+
+// As parallel_each, in sequential chunks, reporting progress from the calling thread.
+template <class F>
+void parallel_each_reporting(std::size_t n, const FilterOptions& o, const std::string& phase,
+                             F&& f) {
+  const std::size_t chunks =
+      o.progress ? std::clamp<std::size_t>(n / 20000, 1, 50) : static_cast<std::size_t>(1);
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const std::size_t b = n * c / chunks, e = n * (c + 1) / chunks;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(b, e, kGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i < r.end(); ++i) f(i);
+                      });
+    if (o.progress) o.progress(phase, n ? static_cast<double>(e) / static_cast<double>(n) : 1.0);
+  }
+}
+
+void report(const FilterOptions& o, const std::string& phase, double fraction) {
+  if (o.progress) o.progress(phase, fraction);
+}
+
+template <class T>
+std::string to_str(const T& v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+[[noreturn]] void bad_option(const std::string& name, const std::string& value,
+                             const std::string& range) {
+  throw OptionError("filter option " + name + " = " + value + " is invalid: expected " + range);
+}
+
+void check_int(const std::string& name, long long v, long long lo, long long hi) {
+  if (v < lo || v > hi)
+    bad_option(name, to_str(v), "an integer in [" + to_str(lo) + ", " + to_str(hi) + "]");
+}
+
+// lo_open: (lo, hi]; otherwise [lo, hi].
+void check_real(const std::string& name, double v, double lo, double hi, bool lo_open) {
+  const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && v <= hi;
+  if (!ok)
+    bad_option(
+        name, to_str(v),
+        std::string("a number in ") + (lo_open ? "(" : "[") + to_str(lo) + ", " + to_str(hi) + "]");
+}
+
+std::size_t peak_rss_bytes() {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      std::istringstream s(line.substr(6));
+      std::size_t kb = 0;
+      s >> kb;
+      return kb * 1024;
+    }
+  }
+  return 0;
+}
+
+template <class T>
+T median_of(std::vector<T> v) {
+  if (v.empty()) return T{};
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>((v.size() - 1) / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Point data of one pass, in processing order. Positions are relative to the cloud's origin.
+struct Points {
+  std::vector<Eigen::Vector3d> p;
+  std::vector<Eigen::Vector3f> v;  // unit sensor normals (zero = none); empty = none
+  std::vector<float> w;            // weights; empty = all 1
+  std::vector<float> hi;           // per-point kernel size; empty = the fixed h
+  double h = 0;
+  double hi_at(std::size_t i) const { return hi.empty() ? h : static_cast<double>(hi[i]); }
+  bool has_v(std::size_t i) const { return !v.empty() && v[i].squaredNorm() > 0.5f; }
+  float w_at(std::size_t i) const { return w.empty() ? 1.0f : w[i]; }
+};
+
+struct Fit {
+  Eigen::Vector3d c;       // weighted centroid
+  Eigen::Vector3d lambda;  // ascending eigenvalues of C (m^2), not floored
+  Eigen::Matrix3d e;       // eigenvectors (columns, matching lambda)
+  Eigen::Vector3f n;       // kernel normal
+};
+
+// Weighted PCA of the neighbours of point i within h (eq. 2). `visit(g)` must call g(j) for a
+// superset of the neighbours (indices into d). Returns false if fewer than k_min remain.
+template <class Visit>
+bool fit_kernel(const Points& d, std::size_t i, double h, int k_min, bool oriented, Visit&& visit,
+                Fit& out) {
+  if (!(h > 0)) return false;
+  const Eigen::Vector3d pi = d.p[i];
+  const double h2 = h * h, inv_h2 = 1.0 / h2;
+  const bool use_dir = oriented && d.has_v(i);
+  const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
+  double s0 = 0, sx = 0, sy = 0, sz = 0, sxx = 0, syy = 0, szz = 0, sxy = 0, sxz = 0, syz = 0;
+  int count = 0;
+  visit([&](std::size_t j) {
+    const Eigen::Vector3d dj = d.p[j] - pi;
+    const double r2 = dj.squaredNorm();
+    if (!(r2 < h2)) return;
+    if (use_dir && !(d.v[j].dot(vi) > 0.5f)) return;
+    double t = 1.0 - r2 * inv_h2;
+    t *= t;
+    t *= t;
+    ++count;
+    s0 += t;
+    sx += t * dj.x();
+    sy += t * dj.y();
+    sz += t * dj.z();
+    sxx += t * dj.x() * dj.x();
+    syy += t * dj.y() * dj.y();
+    szz += t * dj.z() * dj.z();
+    sxy += t * dj.x() * dj.y();
+    sxz += t * dj.x() * dj.z();
+    syz += t * dj.y() * dj.z();
+  });
+  if (count < k_min || !(s0 > 0)) return false;
+  const Eigen::Vector3d m(sx / s0, sy / s0, sz / s0);
+  Eigen::Matrix3d c;
+  c(0, 0) = sxx / s0 - m.x() * m.x();
+  c(1, 1) = syy / s0 - m.y() * m.y();
+  c(2, 2) = szz / s0 - m.z() * m.z();
+  c(0, 1) = c(1, 0) = sxy / s0 - m.x() * m.y();
+  c(0, 2) = c(2, 0) = sxz / s0 - m.x() * m.z();
+  c(1, 2) = c(2, 1) = syz / s0 - m.y() * m.z();
+  // Solve in units of h^2 (well scaled); closed form, checked against the QR solver in tests.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(c * inv_h2);
+  out.c = pi + m;
+  out.lambda = es.eigenvalues().cwiseMax(0.0) * h2;
+  out.e = es.eigenvectors();
+  out.n = use_dir ? vi : out.e.col(0).cast<float>().normalized();
+  return true;
+}
+
+// The frozen kernels of one pass, in the slot order of their centre index.
+struct KernelSet {
+  std::unique_ptr<NeighborIndex> index;  // over centres (float, relative to the origin)
+  std::vector<float> q;                  // 6 per slot: S^-1 00 11 22, 2x 01 02 12 (1/m^2)
+  std::vector<float> n;                  // 3 per slot
+  std::vector<float> h2;                 // h_j^2
+  std::vector<float> w;                  // w_j
+  std::size_t fitted = 0;                // points that got a kernel (including w = 0)
+};
+
+struct Params {
+  const FilterOptions* o = nullptr;
+  bool oriented = false;
+  double cell = 0;  // grid cell (h, or median h_i)
+};
+
+// Builds the kernels of all points of d. `nref` receives each point's kernel normal (zero if it
+// has no kernel). With kSlots, idx's slots are d's indices; otherwise idx's ids are.
+template <bool kSlots>
+KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params& prm,
+                        std::vector<Eigen::Vector3f>& nref, const std::string& phase) {
+  const std::size_t n = d.p.size();
+  const FilterOptions& o = *prm.o;
+  std::vector<std::uint8_t> valid(n, 0);
+  std::vector<Eigen::Vector3f> centre(n);
+  std::vector<std::array<float, 6>> q(n);
+  nref.assign(n, Eigen::Vector3f::Zero());
+  const double floor2 = o.eigen_floor * o.eigen_floor;
+  parallel_each_reporting(n, o, phase, [&](std::size_t i) {
+    const double h = d.hi_at(i);
+    const Eigen::Vector3f qi =
+        kSlots ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
+    Fit fit;
+    const bool ok = fit_kernel(
+        d, i, h, o.k_min, prm.oriented,
+        [&](auto&& g) {
+          auto cb = [&](std::uint32_t j, float) { g(j); };
+          if constexpr (kSlots)
+            idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
+          else
+            idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
+        },
+        fit);
+    if (!ok) return;
+    nref[i] = fit.n;
+    if (!(d.w_at(i) > 0)) return;  // a zero-weight kernel contributes nothing
+    const double h2 = h * h;
+    Eigen::Vector3d inv;
+    for (int k = 0; k < 3; ++k) inv[k] = 1.0 / std::max(fit.lambda[k], floor2 * h2);
+    const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
+    q[i] = {static_cast<float>(s_inv(0, 0)),     static_cast<float>(s_inv(1, 1)),
+            static_cast<float>(s_inv(2, 2)),     static_cast<float>(2 * s_inv(0, 1)),
+            static_cast<float>(2 * s_inv(0, 2)), static_cast<float>(2 * s_inv(1, 2))};
+    centre[i] = fit.c.cast<float>();
+    valid[i] = 1;
+  });
+  KernelSet ks;
+  for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
+  std::vector<std::uint32_t> members;
+  for (std::size_t i = 0; i < n; ++i)
+    if (valid[i]) members.push_back(static_cast<std::uint32_t>(i));
+  std::vector<Eigen::Vector3f> cs(members.size());
+  for (std::size_t k = 0; k < members.size(); ++k) cs[k] = centre[members[k]];
+  std::vector<Eigen::Vector3f>().swap(centre);
+  ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell);
+  const std::size_t m = members.size();
+  ks.q.resize(6 * m);
+  ks.n.resize(3 * m);
+  ks.h2.resize(m);
+  ks.w.resize(m);
+  const auto& order = ks.index->order();
+  parallel_each(m, [&](std::size_t s) {
+    const std::uint32_t i = members[order[s]];
+    for (int k = 0; k < 6; ++k) ks.q[6 * s + k] = q[i][k];
+    for (int k = 0; k < 3; ++k) ks.n[3 * s + k] = nref[i][k];
+    const double h = d.hi_at(i);
+    ks.h2[s] = static_cast<float>(h * h);
+    ks.w[s] = d.w_at(i);
+  });
+  return ks;
+}
+
+// ---------------------------------------------------------------------------------------------
+struct Projected {
+  std::vector<float> L;
+  std::vector<std::uint8_t> iterations;
+  std::vector<std::uint8_t> flags;
+  std::vector<Eigen::Vector3f> normal;  // n_bar at the end, oriented like the reference normal
+};
+
+struct ProjectionContext {
+  const KernelSet* ks = nullptr;
+  const FilterOptions* o = nullptr;
+  float t2 = 9;
+  float slab2 = 1;
+  double gather_factor = 1.25;
+};
+
+void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
+            detail::CandidateBuffer& buf) {
+  const KernelSet& ks = *ctx.ks;
+  buf.clear();
+  ks.index->for_each_slot_within(of, static_cast<float>(ctx.gather_factor * h),
+                                 [&](std::uint32_t s, float) {
+                                   const Eigen::Vector3f c = ks.index->slot_point(s) - of;
+                                   const float* q = &ks.q[6 * s];
+                                   const float* n = &ks.n[3 * s];
+                                   const float v[15] = {c.x(),
+                                                        c.y(),
+                                                        c.z(),
+                                                        q[0],
+                                                        q[1],
+                                                        q[2],
+                                                        q[3],
+                                                        q[4],
+                                                        q[5],
+                                                        n[0],
+                                                        n[1],
+                                                        n[2],
+                                                        ctx.slab2 * ks.h2[s],
+                                                        ks.h2[s],
+                                                        ks.w[s]};
+                                   buf.push(s, v);
+                                 });
+  buf.finish();
+}
+
+void orient(detail::CandidateBuffer& buf, const Eigen::Vector3f& nref) {
+  using B = detail::CandidateBuffer;
+  for (std::size_t j = 0; j < buf.count; ++j) {
+    const float dot =
+        buf.f[B::kNx][j] * nref.x() + buf.f[B::kNy][j] * nref.y() + buf.f[B::kNz][j] * nref.z();
+    if (dot < 0) {
+      buf.f[B::kNx][j] = -buf.f[B::kNx][j];
+      buf.f[B::kNy][j] = -buf.f[B::kNy][j];
+      buf.f[B::kNz][j] = -buf.f[B::kNz][j];
+    }
+  }
+}
+
+// Projects x (in place) onto a maximum of L; eqs. 6-10 with the options' update rule.
+void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, Eigen::Vector3f nref,
+                   float& L_out, std::uint8_t& iters_out, std::uint8_t& flags_out,
+                   Eigen::Vector3f& normal_out) {
+  using B = detail::CandidateBuffer;
+  thread_local B buf;
+  const FilterOptions& o = *ctx.o;
+  const double tol = o.tolerance * h, regather = 0.25 * h;
+  bool have_ref = nref.squaredNorm() > 0.5f;
+  Eigen::Vector3f of = x.cast<float>();
+  Eigen::Vector3d origin = of.cast<double>();
+  gather(ctx, of, h, buf);
+  if (have_ref) orient(buf, nref);
+  int iters = 0;
+  bool converged = false;
+  Eigen::Vector3f nbar_out = nref;
+  const Eigen::Vector3d start = x;
+  for (int k = 0; k < o.max_iterations; ++k) {
+    if ((x - origin).norm() > regather) {
+      of = x.cast<float>();
+      origin = of.cast<double>();
+      gather(ctx, of, h, buf);
+      if (have_ref) orient(buf, nref);
+    }
+    const Eigen::Vector3d xl = x - origin;
+    const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
+                         static_cast<float>(xl.z())};
+    detail::StepSums s;
+    if (!detail::step_sums(buf, xf, ctx.t2, s)) {
+      flags_out = kFlagUnsupported;
+      iters_out = static_cast<std::uint8_t>(iters);
+      L_out = 0;
+      normal_out = nref;
+      x = start;
+      return;
+    }
+    if (!have_ref) {  // no own kernel and no sensor normal: take the best kernel's normal
+      const float* e = buf.f[B::kE].data();
+      std::size_t best = 0;
+      while (best < buf.count && e[best] != s.e_min) ++best;
+      nref = Eigen::Vector3f(buf.f[B::kNx][best], buf.f[B::kNy][best], buf.f[B::kNz][best]);
+      have_ref = true;
+      orient(buf, nref);
+      detail::step_sums(buf, xf, ctx.t2, s);
+    }
+    const Eigen::Vector3d m(s.dn[0] / s.s, s.dn[1] / s.s, s.dn[2] / s.s);
+    Eigen::Vector3d nb(s.n[0], s.n[1], s.n[2]);
+    const double nb_len = nb.norm();
+    nb = nb_len > 1e-12 * s.s ? Eigen::Vector3d(nb / nb_len) : nref.cast<double>();
+    const double mu = m.dot(nb);
+    double step_len;
+    if (o.update == UpdateMode::kNormal) {
+      x -= mu * nb;
+      step_len = std::abs(mu);
+    } else {
+      x -= m;
+      step_len = m.norm();
+    }
+    ++iters;
+    nbar_out = nb.cast<float>();
+    if (step_len < tol) {
+      converged = true;
+      break;
+    }
+  }
+  if ((x - origin).norm() > regather) {
+    of = x.cast<float>();
+    origin = of.cast<double>();
+    gather(ctx, of, h, buf);
+  }
+  const Eigen::Vector3d xl = x - origin;
+  const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
+                       static_cast<float>(xl.z())};
+  L_out = static_cast<float>(detail::likelihood(buf, xf, ctx.t2));
+  iters_out = static_cast<std::uint8_t>(std::min(iters, 255));
+  flags_out = converged ? 0 : kFlagNotConverged;
+  normal_out = nbar_out;
+}
+
+void project_all(const Points& d, const KernelSet& ks, const std::vector<Eigen::Vector3f>& nref,
+                 const FilterOptions& o, std::vector<Eigen::Vector3d>& x, Projected& out,
+                 const std::string& phase) {
+  ProjectionContext ctx;
+  ctx.ks = &ks;
+  ctx.o = &o;
+  ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
+  ctx.slab2 = static_cast<float>(o.slab * o.slab);
+  ctx.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
+  const std::size_t n = x.size();
+  out.L.assign(n, 0);
+  out.iterations.assign(n, 0);
+  out.flags.assign(n, 0);
+  out.normal.assign(n, Eigen::Vector3f::Zero());
+  parallel_each_reporting(n, o, phase, [&](std::size_t i) {
+    // Sensor normals are the reference orientation when present, else the own kernel's normal.
+    const Eigen::Vector3f ref = d.has_v(i) ? d.v[i] : nref[i];
+    project_point(ctx, x[i], d.hi_at(i), ref, out.L[i], out.iterations[i], out.flags[i],
+                  out.normal[i]);
+  });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Open-addressing map from a 63-bit cell key to the head of a list (sequential use only).
+class CellMap {
+ public:
+  explicit CellMap(std::size_t expected) {
+    std::size_t cap = 16;
+    while (cap < 2 * expected) cap *= 2;
+    mask_ = cap - 1;
+    keys_.assign(cap, kEmpty);
+    vals_.assign(cap, 0);
+  }
+  // Value slot for key, inserting `init` if absent.
+  std::uint32_t& at(std::uint64_t key, std::uint32_t init) {
+    std::uint64_t h = (key * 0x9E3779B97F4A7C15ULL) >> 17;
+    while (true) {
+      const std::uint64_t s = h & mask_;
+      if (keys_[s] == key) return vals_[s];
+      if (keys_[s] == kEmpty) {
+        keys_[s] = key;
+        vals_[s] = init;
+        return vals_[s];
+      }
+      ++h;
+    }
+  }
+  const std::uint32_t* find(std::uint64_t key) const {
+    std::uint64_t h = (key * 0x9E3779B97F4A7C15ULL) >> 17;
+    while (true) {
+      const std::uint64_t s = h & mask_;
+      if (keys_[s] == key) return &vals_[s];
+      if (keys_[s] == kEmpty) return nullptr;
+      ++h;
+    }
+  }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~0ULL;
+  std::vector<std::uint64_t> keys_;
+  std::vector<std::uint32_t> vals_;
+  std::uint64_t mask_ = 0;
+};
+
+constexpr std::uint32_t kNone = 0xffffffffu;
+
+struct Clusters {
+  std::vector<std::uint32_t> seed;        // data index of each representative
+  std::vector<std::uint32_t> count;       // members
+  std::vector<Eigen::Vector3d> position;  // L-weighted mean (relative to the origin)
+  std::vector<std::uint32_t> rep_of;      // per data point: its representative or kNone
+};
+
+Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& pr, double eps,
+                        bool oriented) {
+  const std::size_t n = x.size();
+  Clusters cl;
+  cl.rep_of.assign(n, kNone);
+  std::vector<std::uint32_t> cand;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!(pr.flags[i] & kFlagUnsupported)) cand.push_back(static_cast<std::uint32_t>(i));
+  if (!(eps > 0)) {
+    for (std::uint32_t i : cand) {
+      cl.rep_of[i] = static_cast<std::uint32_t>(cl.seed.size());
+      cl.seed.push_back(i);
+      cl.count.push_back(1);
+      cl.position.push_back(x[i]);
+    }
+    return cl;
+  }
+  tbb::parallel_sort(cand.begin(), cand.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return pr.L[a] != pr.L[b] ? pr.L[a] > pr.L[b] : a < b;
+  });
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::max());
+  Eigen::Vector3d hi = -lo;
+  for (std::uint32_t i : cand) {
+    lo = lo.cwiseMin(x[i]);
+    hi = hi.cwiseMax(x[i]);
+  }
+  double cell = 2 * eps;
+  if (!cand.empty()) {
+    const double extent = (hi - lo).maxCoeff();
+    const double max_cells = (1 << 21) - 4;
+    if (extent / cell > max_cells) cell = extent / max_cells * (1 + 1e-9);
+    lo -= Eigen::Vector3d::Constant(cell);
+  }
+  auto coord = [&](double v, int a) {
+    return static_cast<std::int32_t>(
+        std::clamp(std::floor((v - lo[a]) / cell), 0.0, static_cast<double>((1 << 21) - 1)));
+  };
+  CellMap map(cand.size());
+  std::vector<std::uint32_t> next;  // per representative: next one in the same cell
+  std::vector<double> lsum;
+  const double eps2 = eps * eps;
+  for (std::uint32_t i : cand) {
+    const Eigen::Vector3d& p = x[i];
+    std::uint32_t best = kNone;
+    const bool can_join = !(pr.flags[i] & kFlagNotConverged);
+    if (can_join) {
+      double best_d2 = eps2;
+      std::int32_t a0[3], a1[3];
+      for (int a = 0; a < 3; ++a) {
+        a0[a] = coord(p[a] - eps, a);
+        a1[a] = coord(p[a] + eps, a);
+      }
+      for (std::int32_t cz = a0[2]; cz <= a1[2]; ++cz)
+        for (std::int32_t cy = a0[1]; cy <= a1[1]; ++cy)
+          for (std::int32_t cx = a0[0]; cx <= a1[0]; ++cx) {
+            const std::uint32_t* head = map.find(detail::cell_key(cx, cy, cz));
+            for (std::uint32_t r = head ? *head : kNone; r != kNone; r = next[r]) {
+              const std::uint32_t s = cl.seed[r];
+              const double d2 = (x[s] - p).squaredNorm();
+              if (!(d2 < eps2)) continue;
+              if (oriented && !(pr.normal[s].dot(pr.normal[i]) > 0)) continue;
+              if (best == kNone || d2 < best_d2 || (d2 == best_d2 && r < best)) {
+                best = r;
+                best_d2 = d2;
+              }
+            }
+          }
+    }
+    const double li = std::max(0.0, static_cast<double>(pr.L[i]));
+    if (best != kNone) {
+      cl.rep_of[i] = best;
+      cl.count[best] += 1;
+      cl.position[best] += li * p;
+      lsum[best] += li;
+      continue;
+    }
+    const auto r = static_cast<std::uint32_t>(cl.seed.size());
+    cl.rep_of[i] = r;
+    cl.seed.push_back(i);
+    cl.count.push_back(1);
+    cl.position.push_back(li * p);
+    lsum.push_back(li);
+    next.push_back(kNone);
+    if (can_join) {
+      std::uint32_t& head =
+          map.at(detail::cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)), kNone);
+      next[r] = head;
+      head = r;
+    }
+  }
+  for (std::size_t r = 0; r < cl.seed.size(); ++r)
+    cl.position[r] = lsum[r] > 0 ? Eigen::Vector3d(cl.position[r] / lsum[r]) : x[cl.seed[r]];
+  return cl;
+}
+
+std::uint32_t find_root(std::vector<std::uint32_t>& parent, std::uint32_t a) {
+  while (parent[a] != a) {
+    parent[a] = parent[parent[a]];
+    a = parent[a];
+  }
+  return a;
+}
+
+// ---------------------------------------------------------------------------------------------
+FilterResult run(const PointCloud& input, const FilterOptions& o) {
+  const auto t_start = Clock::now();
+  FilterResult result;
+  FilterStats& st = result.stats;
+  const std::size_t N = input.size();
+  st.points_in = N;
+  st.threads = tbb::this_task_arena::max_concurrency();
+  if (N == 0) {
+    st.peak_rss_bytes = peak_rss_bytes();
+    return result;
+  }
+  if (N >= 0xffffffffULL) throw InputError("filter: more than 4 billion points are not supported");
+  for (std::size_t i = 0; i < N; ++i)
+    if (!input.positions[i].allFinite())
+      throw InputError("filter input", "point " + std::to_string(i),
+                       "non-finite coordinate (remove invalid points before filtering)");
+  const bool use_w = o.use_confidences && input.has_confidences();
+  if (use_w) {
+    if (input.confidences.size() != N)
+      throw InputError("filter input", "confidences", "one confidence per point");
+    for (std::size_t i = 0; i < N; ++i)
+      if (!(input.confidences[i] >= 0.0f && input.confidences[i] <= 1.0f))
+        throw InputError("filter input", "point " + std::to_string(i),
+                         "confidence " + to_str(input.confidences[i]) + " outside [0, 1]");
+  }
+  const bool use_v = o.use_sensor_normals && input.has_normals() && input.normals.size() == N;
+
+  // ----- scale -------------------------------------------------------------------------------
+  auto t = Clock::now();
+  report(o, "scale", 0);
+  const Eigen::AlignedBox3d box = bounding_box(input);
+  const Eigen::Vector3d origin = box.center();
+  const double diag = box.diagonal().norm();
+  std::vector<Eigen::Vector3f> pf(N);
+  parallel_each(N, [&](std::size_t i) { pf[i] = (input.positions[i] - origin).cast<float>(); });
+  Points in;  // input order
+  in.p.resize(N);
+  parallel_each(N, [&](std::size_t i) { in.p[i] = input.positions[i] - origin; });
+  if (use_v) {
+    in.v.resize(N);
+    parallel_each(N, [&](std::size_t i) {
+      const Eigen::Vector3f v = input.normals[i];
+      const float len = v.norm();
+      in.v[i] =
+          (std::isfinite(len) && len > 1e-6f) ? Eigen::Vector3f(v / len) : Eigen::Vector3f::Zero();
+    });
+  }
+  if (use_w) in.w = input.confidences;
+
+  const int K = o.scale == ScaleMode::kAdaptive ? o.k_adaptive : o.k_h;
+  std::unique_ptr<NeighborIndex> index;  // cell ~h over pf (input order)
+  double h = 0;
+  const double fallback_h = diag > 0 ? 1e-3 * diag : 1e-3;
+  if (o.scale == ScaleMode::kFixed) {
+    h = o.h;
+  } else {
+    NeighborIndex tree(pf, 0.0);  // k-d tree only
+    if (o.scale == ScaleMode::kAuto) {
+      const std::size_t M = std::min<std::size_t>(N, 10000);
+      std::vector<double> kth(M, 0.0);
+      std::vector<std::size_t> sample(M);
+      for (std::size_t k = 0; k < M; ++k) sample[k] = k * N / M;
+      parallel_each(M, [&](std::size_t k) {
+        thread_local std::vector<std::pair<float, std::uint32_t>> nn;
+        tree.knn(pf[sample[k]], static_cast<std::size_t>(o.k_h) + 1, nn);
+        kth[k] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
+      });
+      double h0 = median_of(kth);
+      if (!(h0 > 0)) h0 = fallback_h;  // at least K_h + 1 coincident points
+      st.h0 = h0;
+      index = std::make_unique<NeighborIndex>(pf, h0);
+      // Noise: median sqrt(lambda_3) of the PCA at h0 over the same sample.
+      std::vector<double> sig(M, -1.0);
+      in.h = h0;
+      parallel_each(M, [&](std::size_t k) {
+        Fit fit;
+        const std::size_t i = sample[k];
+        if (fit_kernel(
+                in, i, h0, o.k_min, use_v,
+                [&](auto&& g) {
+                  index->for_each_within(pf[i], static_cast<float>(h0 * 1.0001),
+                                         [&](std::uint32_t j, float) { g(j); });
+                },
+                fit))
+          sig[k] = std::sqrt(fit.lambda[0]);
+      });
+      sig.erase(std::remove(sig.begin(), sig.end(), -1.0), sig.end());
+      st.noise_sigma = median_of(sig);
+      h = std::max(h0, 3 * st.noise_sigma);
+      if (h > h0) index.reset();
+    } else {
+      std::vector<float> hi(N);
+      parallel_each_reporting(N, o, "scale", [&](std::size_t i) {
+        thread_local std::vector<std::pair<float, std::uint32_t>> nn;
+        tree.knn(pf[i], static_cast<std::size_t>(o.k_adaptive) + 1, nn);
+        hi[i] = nn.empty() ? 0.0f : std::sqrt(nn.back().first);
+      });
+      in.hi = std::move(hi);
+      h = median_of(in.hi);
+      if (!(h > 0)) h = fallback_h;
+      const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
+      st.h_min = *mm.first;
+      st.h_max = *mm.second;
+    }
+  }
+  in.h = h;
+  st.h = h;
+  if (o.scale != ScaleMode::kAdaptive) st.h_min = st.h_max = h;
+  st.mean_spacing = h / std::sqrt(static_cast<double>(K) / M_PI);
+  st.merge_eps = o.merge_eps < 0 ? 0.25 * st.mean_spacing : o.merge_eps;
+  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), h);
+  std::vector<Eigen::Vector3f>().swap(pf);
+  // Spatial sort: process and store everything in grid order.
+  const std::vector<std::uint32_t> src = index->order();
+  Points d;
+  d.h = h;
+  d.p.resize(N);
+  parallel_each(N, [&](std::size_t s) { d.p[s] = in.p[src[s]]; });
+  std::vector<Eigen::Vector3d>().swap(in.p);
+  if (!in.v.empty()) {
+    d.v.resize(N);
+    parallel_each(N, [&](std::size_t s) { d.v[s] = in.v[src[s]]; });
+    std::vector<Eigen::Vector3f>().swap(in.v);
+  }
+  if (!in.w.empty()) {
+    d.w.resize(N);
+    parallel_each(N, [&](std::size_t s) { d.w[s] = in.w[src[s]]; });
+    std::vector<float>().swap(in.w);
+  }
+  if (!in.hi.empty()) {
+    d.hi.resize(N);
+    parallel_each(N, [&](std::size_t s) { d.hi[s] = in.hi[src[s]]; });
+    std::vector<float>().swap(in.hi);
+  }
+  st.seconds_scale = since(t);
+
+  // ----- kernels + projection (passes) -------------------------------------------------------
+  Params prm;
+  prm.o = &o;
+  prm.oriented = use_v;
+  prm.cell = h;
+  std::vector<Eigen::Vector3d> x = d.p;  // projected positions (data order)
+  Projected pr;
+  {
+    t = Clock::now();
+    std::vector<Eigen::Vector3f> nref;
+    KernelSet ks = build_kernels<true>(d, *index, prm, nref, "kernels");
+    index.reset();
+    st.kernels = ks.fitted;
+    st.seconds_kernels += since(t);
+    t = Clock::now();
+    project_all(d, ks, nref, o, x, pr, "projection");
+    st.seconds_projection += since(t);
+  }
+  std::vector<Eigen::Vector3d>().swap(d.p);
+  if (o.passes >= 2) {
+    // Second pass: kernels rebuilt from the supported output points, projected again.
+    t = Clock::now();
+    std::vector<std::uint32_t> sub;
+    for (std::size_t i = 0; i < N; ++i)
+      if (!(pr.flags[i] & kFlagUnsupported)) sub.push_back(static_cast<std::uint32_t>(i));
+    Points d2;
+    d2.h = h;
+    d2.p.resize(sub.size());
+    std::vector<Eigen::Vector3f> pf2(sub.size());
+    for (std::size_t k = 0; k < sub.size(); ++k) {
+      d2.p[k] = x[sub[k]];
+      pf2[k] = x[sub[k]].cast<float>();
+    }
+    if (!d.v.empty())
+      for (std::uint32_t i : sub) d2.v.push_back(d.v[i]);
+    if (!d.w.empty())
+      for (std::uint32_t i : sub) d2.w.push_back(d.w[i]);
+    if (!d.hi.empty())
+      for (std::uint32_t i : sub) d2.hi.push_back(d.hi[i]);
+    NeighborIndex index2(std::move(pf2), h);
+    std::vector<Eigen::Vector3f> nref2;
+    KernelSet ks2 = build_kernels<false>(d2, index2, prm, nref2, "kernels (pass 2)");
+    st.seconds_kernels += since(t);
+    t = Clock::now();
+    std::vector<Eigen::Vector3d> x2 = d2.p;
+    Projected pr2;
+    project_all(d2, ks2, nref2, o, x2, pr2, "projection (pass 2)");
+    for (std::size_t k = 0; k < sub.size(); ++k) {
+      const std::uint32_t i = sub[k];
+      x[i] = x2[k];
+      pr.L[i] = pr2.L[k];
+      pr.iterations[i] = static_cast<std::uint8_t>(
+          std::min(255, static_cast<int>(pr.iterations[i]) + pr2.iterations[k]));
+      pr.flags[i] = pr2.flags[k];
+      if (!(pr2.flags[k] & kFlagUnsupported)) pr.normal[i] = pr2.normal[k];
+    }
+    st.seconds_projection += since(t);
+  }
+
+  // Iteration statistics over the supported points.
+  {
+    std::array<std::size_t, 256> hist{};
+    std::size_t supported = 0;
+    double sum = 0;
+    for (std::size_t i = 0; i < N; ++i) {
+      if (pr.flags[i] & kFlagUnsupported) continue;
+      ++supported;
+      ++hist[pr.iterations[i]];
+      sum += pr.iterations[i];
+      if (pr.flags[i] & kFlagNotConverged) ++st.not_converged;
+    }
+    st.mean_iterations = supported ? sum / static_cast<double>(supported) : 0;
+    std::size_t acc = 0;
+    const double target = 0.95 * static_cast<double>(supported);
+    for (int k = 0; k < 256 && supported; ++k) {
+      acc += hist[k];
+      if (static_cast<double>(acc) >= target) {
+        st.p95_iterations = k;
+        break;
+      }
+    }
+  }
+
+  // ----- clustering --------------------------------------------------------------------------
+  t = Clock::now();
+  report(o, "clustering", 0);
+  Clusters cl = cluster_points(x, pr, st.merge_eps, use_v);
+  st.seconds_clustering = since(t);
+  report(o, "clustering", 1);
+
+  // ----- outliers ----------------------------------------------------------------------------
+  t = Clock::now();
+  report(o, "outliers", 0);
+  const std::size_t R = cl.seed.size();
+  std::vector<std::uint8_t> rep_drop(R, 0);  // 0 keep, else flag
+  if (R > 0 && o.tau > 0) {
+    std::vector<Eigen::Vector3f> rf(R);
+    parallel_each(R, [&](std::size_t r) { rf[r] = cl.position[r].cast<float>(); });
+    NeighborIndex ridx(std::move(rf), h);
+    std::vector<double> rho(R, 0.0);
+    parallel_each(R, [&](std::size_t r) {
+      const double hr = d.hi_at(cl.seed[r]);
+      std::uint64_t sum = 0;
+      ridx.for_each_within(ridx.point(static_cast<std::uint32_t>(r)), static_cast<float>(hr),
+                           [&](std::uint32_t q, float) { sum += cl.count[q]; });
+      rho[r] = static_cast<double>(sum);
+    });
+    const double threshold = o.tau * median_of(rho);
+    for (std::size_t r = 0; r < R; ++r)
+      if (rho[r] < threshold) rep_drop[r] = kFlagOutlier;
+    report(o, "outliers", 0.5);
+    if (o.remove_small_components) {
+      std::vector<std::uint32_t> parent(R);
+      std::iota(parent.begin(), parent.end(), 0u);
+      for (std::size_t r = 0; r < R; ++r) {
+        if (rep_drop[r]) continue;
+        const double hr = d.hi_at(cl.seed[r]);
+        ridx.for_each_within(ridx.point(static_cast<std::uint32_t>(r)), static_cast<float>(hr),
+                             [&](std::uint32_t q, float) {
+                               if (q <= r || rep_drop[q]) return;
+                               const std::uint32_t a =
+                                   find_root(parent, static_cast<std::uint32_t>(r));
+                               const std::uint32_t b = find_root(parent, q);
+                               if (a != b) parent[std::max(a, b)] = std::min(a, b);
+                             });
+      }
+      std::vector<std::uint64_t> size(R, 0);
+      for (std::size_t r = 0; r < R; ++r)
+        if (!rep_drop[r]) size[find_root(parent, static_cast<std::uint32_t>(r))] += cl.count[r];
+      const std::uint64_t min_size =
+          o.min_component_size > 0
+              ? o.min_component_size
+              : std::max<std::uint64_t>(static_cast<std::uint64_t>(o.k_min),
+                                        static_cast<std::uint64_t>(std::ceil(1e-3 * N)));
+      for (std::size_t r = 0; r < R; ++r)
+        if (!rep_drop[r] && size[find_root(parent, static_cast<std::uint32_t>(r))] < min_size)
+          rep_drop[r] = kFlagOutlier | 8;  // 8: internal mark "small component"
+    }
+  }
+
+  // ----- outputs -----------------------------------------------------------------------------
+  std::vector<std::uint32_t> kept;
+  for (std::size_t r = 0; r < R; ++r)
+    if (!rep_drop[r]) kept.push_back(static_cast<std::uint32_t>(r));
+  std::sort(kept.begin(), kept.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return src[cl.seed[a]] < src[cl.seed[b]]; });
+  {
+    std::vector<std::size_t> seeds(kept.size());
+    for (std::size_t k = 0; k < kept.size(); ++k) seeds[k] = src[cl.seed[kept[k]]];
+    PointCloud& out = result.cloud;
+    out = select(input, seeds);
+    out.grid = OrganizedGrid{};
+    out.normals.resize(kept.size());
+    std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
+        si(kept.size());
+    for (std::size_t k = 0; k < kept.size(); ++k) {
+      const std::uint32_t r = kept[k], s = cl.seed[r];
+      out.positions[k] = cl.position[r] + origin;
+      out.normals[k] = pr.normal[s];
+      L[k] = pr.L[s];
+      it[k] = pr.iterations[s];
+      fl[k] = pr.flags[s] & kFlagNotConverged;
+      mc[k] = cl.count[r];
+      si[k] = src[s];
+    }
+    out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
+    out.set_attribute("iterations", AttributeType::kUInt8, std::move(it));
+    out.set_attribute("flags", AttributeType::kUInt8, std::move(fl));
+    out.set_attribute("merge_count", AttributeType::kUInt32, std::move(mc));
+    out.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
+    st.points_out = kept.size();
+    for (std::uint32_t r : kept) st.merged += cl.count[r] - 1;
+  }
+  {
+    std::vector<std::uint8_t> in_flag(N, 0);
+    for (std::size_t s = 0; s < N; ++s) {
+      if (pr.flags[s] & kFlagUnsupported) {
+        in_flag[src[s]] = kFlagUnsupported;
+        ++st.unsupported;
+      } else {
+        const std::uint8_t f = rep_drop[cl.rep_of[s]];
+        if (f) {
+          in_flag[src[s]] =
+              static_cast<std::uint8_t>(kFlagOutlier | (pr.flags[s] & kFlagNotConverged));
+          if (f & 8)
+            ++st.small_components;
+          else
+            ++st.low_density;
+        }
+      }
+    }
+    std::vector<std::size_t> idx;
+    for (std::size_t i = 0; i < N; ++i)
+      if (in_flag[i]) idx.push_back(i);
+    PointCloud& ol = result.outliers;
+    ol = select(input, idx);
+    ol.grid = OrganizedGrid{};
+    std::vector<double> fl(idx.size()), si(idx.size());
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      fl[k] = in_flag[idx[k]];
+      si[k] = static_cast<double>(idx[k]);
+    }
+    ol.set_attribute("flags", AttributeType::kUInt8, std::move(fl));
+    ol.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
+  }
+  st.seconds_outliers = since(t);
+  report(o, "outliers", 1);
+  st.seconds_total = since(t_start);
+  st.peak_rss_bytes = peak_rss_bytes();
+  return result;
+}
+
+}  // namespace
+
+void validate(const FilterOptions& o) {
+  if (o.scale == ScaleMode::kFixed) {
+    if (!(std::isfinite(o.h) && o.h > 0))
+      bad_option("h", to_str(o.h), "a kernel size > 0 metres with the fixed scale");
+  } else if (!(std::isfinite(o.h) && o.h >= 0)) {
+    bad_option("h", to_str(o.h), "0 (unused) or a size > 0 metres");
+  }
+  if (o.scale != ScaleMode::kAuto && o.scale != ScaleMode::kFixed &&
+      o.scale != ScaleMode::kAdaptive)
+    bad_option("scale", to_str(static_cast<int>(o.scale)), "auto, fixed or adaptive");
+  if (o.update != UpdateMode::kNormal && o.update != UpdateMode::kVector)
+    bad_option("update", to_str(static_cast<int>(o.update)), "normal or vector");
+  check_int("k_h", o.k_h, 2, 1000);
+  check_int("k_adaptive", o.k_adaptive, 2, 1000);
+  check_int("k_min", o.k_min, 3, 1000);
+  check_real("truncation_sigma", o.truncation_sigma, 0, 10, true);
+  check_real("slab", o.slab, 0, 10, true);
+  check_real("eigen_floor", o.eigen_floor, 0, 1, true);
+  check_real("tolerance", o.tolerance, 0, 0.1, true);
+  check_int("max_iterations", o.max_iterations, 1, 255);
+  check_int("passes", o.passes, 1, 2);
+  if (!std::isfinite(o.merge_eps))
+    bad_option("merge_eps", to_str(o.merge_eps),
+               "a finite number (< 0: default 0.25 x mean spacing, 0: off, > 0: metres)");
+  check_real("tau", o.tau, 0, 1, false);
+  if (o.min_component_size > 1000000000ULL)
+    bad_option("min_component_size", to_str(o.min_component_size),
+               "0 (automatic) or a point count <= 1e9");
+  check_int("threads", o.threads, 0, 1024);
+}
+
+FilterResult robust_filter(const PointCloud& input, const FilterOptions& options) {
+  validate(options);
+  try {
+    input.check_consistent();
+  } catch (const std::logic_error& e) {
+    throw InputError("filter input", "point arrays", e.what());
+  }
+  const int threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
+  tbb::task_arena arena(threads);
+  FilterResult result;
+  arena.execute([&] { result = run(input, options); });
+  return result;
+}
+
+}  // namespace scanclean

@@ -1,0 +1,94 @@
+#include "scanclean/filter/neighbor_index.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+
+namespace scanclean {
+namespace {
+
+// A mix of a dense cluster, a sheet and sparse far points, so that both the grid path and the
+// k-d tree path are exercised.
+std::vector<Eigen::Vector3f> mixed_points(std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g(0.0f, 0.05f);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<Eigen::Vector3f> p;
+  for (int i = 0; i < 2000; ++i) p.emplace_back(g(rng), g(rng), g(rng));
+  for (int i = 0; i < 2000; ++i) p.emplace_back(u(rng), u(rng), 0.3f + 0.01f * g(rng));
+  for (int i = 0; i < 200; ++i) p.emplace_back(5 * u(rng), 5 * u(rng), 5 * u(rng));
+  p.push_back(p[10]);  // an exact duplicate
+  return p;
+}
+
+TEST(NeighborIndexTest, RadiusQueriesMatchBruteForce) {
+  const auto pts = mixed_points(7);  // seed 7: fixed fixture
+  NeighborIndex index(pts, 0.05);
+  std::mt19937 rng(11);  // seed 11: query choice
+  std::uniform_int_distribution<std::size_t> pick(0, pts.size() - 1);
+  for (float r : {0.01f, 0.05f, 0.12f, 0.5f, 3.0f}) {
+    for (int k = 0; k < 60; ++k) {
+      const Eigen::Vector3f q = pts[pick(rng)] + Eigen::Vector3f(0.003f, -0.002f, 0.001f);
+      std::vector<std::uint32_t> got, want, slots;
+      index.for_each_within(q, r, [&](std::uint32_t i, float d2) {
+        got.push_back(i);
+        EXPECT_NEAR(d2, (pts[i] - q).squaredNorm(), 1e-5f);
+      });
+      index.for_each_slot_within(q, r, [&](std::uint32_t s, float) {
+        slots.push_back(index.order()[s]);
+        EXPECT_EQ(index.slot_point(s), pts[index.order()[s]]);
+      });
+      for (std::uint32_t i = 0; i < pts.size(); ++i)
+        if ((pts[i] - q).squaredNorm() < r * r) want.push_back(i);
+      std::sort(got.begin(), got.end());
+      std::sort(slots.begin(), slots.end());
+      EXPECT_EQ(got, want) << "r = " << r;
+      EXPECT_EQ(slots, want) << "r = " << r;
+    }
+  }
+}
+
+TEST(NeighborIndexTest, OrderIsAPermutation) {
+  const auto pts = mixed_points(3);  // seed 3: fixed fixture
+  NeighborIndex index(pts, 0.1);
+  std::vector<std::uint32_t> o = index.order();
+  std::sort(o.begin(), o.end());
+  for (std::uint32_t i = 0; i < o.size(); ++i) ASSERT_EQ(o[i], i);
+  for (std::uint32_t i = 0; i < pts.size(); ++i) EXPECT_EQ(index.order()[index.slot_of(i)], i);
+}
+
+TEST(NeighborIndexTest, KnnMatchesBruteForce) {
+  const auto pts = mixed_points(5);  // seed 5: fixed fixture
+  for (double cell : {0.0, 0.05}) {
+    NeighborIndex index(pts, cell);
+    std::vector<std::pair<float, std::uint32_t>> got;
+    for (std::size_t qi = 0; qi < pts.size(); qi += 97) {
+      const Eigen::Vector3f q = pts[qi];
+      index.knn(q, 20, got);
+      std::vector<float> want;
+      for (const auto& p : pts) want.push_back((p - q).squaredNorm());
+      std::sort(want.begin(), want.end());
+      ASSERT_EQ(got.size(), 20u);
+      for (std::size_t k = 0; k < 20; ++k) EXPECT_NEAR(got[k].first, want[k], 1e-6f);
+      EXPECT_FLOAT_EQ((pts[got[19].second] - q).squaredNorm(), got[19].first);
+    }
+  }
+}
+
+TEST(NeighborIndexTest, EmptyAndTinySets) {
+  NeighborIndex empty({}, 1.0);
+  int calls = 0;
+  empty.for_each_within(Eigen::Vector3f::Zero(), 1.0f, [&](std::uint32_t, float) { ++calls; });
+  EXPECT_EQ(calls, 0);
+  NeighborIndex one({Eigen::Vector3f(1, 2, 3)}, 0.5);
+  std::vector<std::pair<float, std::uint32_t>> nn;
+  one.knn(Eigen::Vector3f(1, 2, 3), 5, nn);
+  ASSERT_EQ(nn.size(), 1u);
+  EXPECT_EQ(nn[0].first, 0.0f);
+  one.for_each_within(Eigen::Vector3f(100, 2, 3), 1.0f, [&](std::uint32_t, float) { ++calls; });
+  EXPECT_EQ(calls, 0);
+}
+
+}  // namespace
+}  // namespace scanclean
