@@ -1,0 +1,151 @@
+#include "png16.h"
+
+#include <fstream>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <system_error>
+
+#include "scanclean/core/atomic_file.h"
+#include "scanclean/core/errors.h"
+
+namespace scanclean::detail {
+
+namespace {
+constexpr unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+constexpr std::uint64_t kMaxPixels = std::uint64_t{1} << 26;
+
+std::uint32_t be32(const unsigned char* p) {
+  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
+         std::uint32_t{p[3]};
+}
+}  // namespace
+
+std::vector<unsigned char> read_file_bytes(const std::filesystem::path& file,
+                                           std::uintmax_t max_bytes) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(file, ec))
+    throw InputError(file.string(), "", "missing (or not a regular file)");
+  const std::uintmax_t size = std::filesystem::file_size(file, ec);
+  if (ec) throw IoError(file.string() + ": cannot stat: " + ec.message());
+  if (size > max_bytes)
+    throw InputError(file.string(), "",
+                     "file of " + std::to_string(size) + " bytes is larger than the limit of " +
+                         std::to_string(max_bytes) + " bytes");
+  std::vector<unsigned char> bytes(static_cast<std::size_t>(size));
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw IoError(file.string() + ": cannot open for reading");
+  if (size > 0 &&
+      !in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size)))
+    throw IoError(file.string() + ": read failed after " + std::to_string(in.gcount()) + " bytes");
+  return bytes;
+}
+
+PngHeader parse_png_header(const std::vector<unsigned char>& bytes, const std::string& file) {
+  if (bytes.size() < 33)
+    throw InputError(file, byte_place(bytes.size()),
+                     "truncated PNG: " + std::to_string(bytes.size()) +
+                         " bytes, a PNG needs at least 33 for its signature and header");
+  for (int i = 0; i < 8; ++i)
+    if (bytes[i] != kSignature[i])
+      throw InputError(file, byte_place(static_cast<std::uint64_t>(i)),
+                       "not a PNG file (bad signature)");
+  if (be32(&bytes[8]) != 13 || std::string(bytes.begin() + 12, bytes.begin() + 16) != "IHDR")
+    throw InputError(file, byte_place(8), "PNG without an IHDR chunk first");
+  PngHeader h;
+  h.width = be32(&bytes[16]);
+  h.height = be32(&bytes[20]);
+  h.bit_depth = bytes[24];
+  h.color_type = bytes[25];
+  return h;
+}
+
+std::string describe_png(const PngHeader& h) {
+  std::string kind;
+  switch (h.color_type) {
+    case 0:
+      kind = "grayscale";
+      break;
+    case 2:
+      kind = "RGB";
+      break;
+    case 3:
+      kind = "palette";
+      break;
+    case 4:
+      kind = "grayscale+alpha";
+      break;
+    case 6:
+      kind = "RGBA";
+      break;
+    default:
+      kind = "colour type " + std::to_string(h.color_type);
+  }
+  return std::to_string(h.bit_depth) + "-bit " + kind;
+}
+
+Image<std::uint16_t> read_png16(const std::filesystem::path& file, int width, int height,
+                                const std::string& role) {
+  const std::string name = file.string();
+  // A 16-bit PNG never exceeds raw size much; 2^26 px * 2 bytes plus slack bounds the read.
+  std::uintmax_t max_bytes = (width > 0 && height > 0)
+                                 ? std::uintmax_t{2} * width * height + (1u << 20)
+                                 : std::uintmax_t{2} * kMaxPixels + (1u << 20);
+  // Worst-case PNG expansion is small; allow 2x raw for incompressible noise.
+  max_bytes *= 2;
+  const std::vector<unsigned char> bytes = read_file_bytes(file, max_bytes);
+  const PngHeader h = parse_png_header(bytes, name);
+  if (h.bit_depth != 16 || h.color_type != 0)
+    throw InputError(name, "PNG header",
+                     role + " image must be a 16-bit grayscale PNG, got " + describe_png(h));
+  if (width > 0 && height > 0 &&
+      (h.width != static_cast<std::uint32_t>(width) ||
+       h.height != static_cast<std::uint32_t>(height)))
+    throw InputError(name, "PNG header",
+                     role + " image is " + std::to_string(h.width) + "x" +
+                         std::to_string(h.height) + ", expected " + std::to_string(width) + "x" +
+                         std::to_string(height) + " (the size in session.json)");
+  if (h.width == 0 || h.height == 0 || std::uint64_t{h.width} * h.height > kMaxPixels)
+    throw InputError(
+        name, "PNG header",
+        "implausible image size " + std::to_string(h.width) + "x" + std::to_string(h.height));
+  cv::Mat mat;
+  try {
+    mat = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw InputError(name, "", "cannot decode PNG: " + e.msg);
+  }
+  if (mat.empty()) throw InputError(name, "", "cannot decode PNG (corrupt or truncated data)");
+  if (mat.type() != CV_16UC1)
+    throw InputError(name, "",
+                     role + " image decoded to " + std::to_string(mat.channels()) +
+                         " channel(s) of " + std::to_string(mat.elemSize1() * 8) +
+                         " bits, expected one 16-bit channel");
+  if (mat.cols != static_cast<int>(h.width) || mat.rows != static_cast<int>(h.height))
+    throw InputError(name, "", "decoded size differs from the PNG header");
+  Image<std::uint16_t> out(mat.cols, mat.rows);
+  for (int v = 0; v < mat.rows; ++v) {
+    const auto* row = mat.ptr<std::uint16_t>(v);
+    std::copy(row, row + mat.cols, out.data.begin() + static_cast<std::ptrdiff_t>(v) * mat.cols);
+  }
+  return out;
+}
+
+void write_png16_atomically(const std::filesystem::path& file, const Image<std::uint16_t>& image) {
+  // cv::Mat header over the image's own buffer (no copy); imencode does not modify it.
+  cv::Mat mat(image.height, image.width, CV_16UC1, const_cast<std::uint16_t*>(image.data.data()));
+  std::vector<unsigned char> encoded;
+  bool ok = false;
+  try {
+    // Compression level 1: fast (recording keeps up with 30 fps), still lossless.
+    ok = cv::imencode(".png", mat, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1});
+  } catch (const cv::Exception& e) {
+    throw IoError(file.string() + ": PNG encoding failed: " + e.msg);
+  }
+  if (!ok) throw IoError(file.string() + ": PNG encoding failed");
+  write_file_atomically(file, [&](std::ostream& out) {
+    out.write(reinterpret_cast<const char*>(encoded.data()),
+              static_cast<std::streamsize>(encoded.size()));
+  });
+}
+
+}  // namespace scanclean::detail

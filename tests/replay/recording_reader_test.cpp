@@ -1,0 +1,319 @@
+#include "scanclean/replay/recording_reader.h"
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+#include <thread>
+
+#include "replay_fixtures.h"
+#include "scanclean/core/errors.h"
+#include "scanclean/replay/recording_writer.h"
+#include "support/data_paths.h"
+
+namespace scanclean {
+namespace {
+
+namespace fs = std::filesystem;
+
+void write_fixture(const fs::path& dir, const std::vector<std::uint64_t>& indices, bool confidence,
+                   bool finish = true) {
+  const SessionMetadata s = test::fixture_session();
+  RecordingWriter w(dir, s);
+  for (std::uint64_t i : indices) w.write(test::fixture_frame(s, i, confidence));
+  EXPECT_EQ(w.frames_written(), indices.size());
+  if (finish) w.finish();
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void spit(const fs::path& p, const std::string& text) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out << text;
+}
+
+void expect_frame_equals(const RangeFrame& got, const RangeFrame& want) {
+  EXPECT_EQ(got.index, want.index);
+  EXPECT_EQ(got.device_ts_us, want.device_ts_us);
+  EXPECT_EQ(got.host_ts_ns, want.host_ts_ns);
+  EXPECT_EQ(got.depth_unit_m, want.depth_unit_m);
+  ASSERT_EQ(got.depth.width, want.depth.width);
+  ASSERT_EQ(got.depth.height, want.depth.height);
+  EXPECT_EQ(got.depth.data, want.depth.data);  // bit-exact
+  EXPECT_EQ(got.K.fx, want.K.fx);
+  EXPECT_EQ(got.K.cy, want.K.cy);
+  EXPECT_EQ(got.K.dist, want.K.dist);
+  ASSERT_EQ(got.confidence.has_value(), want.confidence.has_value());
+  if (want.confidence) {
+    EXPECT_EQ(got.confidence->data, want.confidence->data);  // bit-exact
+  }
+}
+
+TEST(RecordingReaderTest, WriterReaderRoundTripIsBitExact) {
+  const auto dir = test::make_temp_dir("rec_roundtrip");
+  const std::vector<std::uint64_t> indices{3, 4, 5, 9, 10};  // a gap of 3 dropped frames
+  write_fixture(dir, indices, true);
+  RecordingReader r(dir);
+  EXPECT_TRUE(r.warnings().empty());
+  const SessionMetadata want = test::fixture_session();
+  EXPECT_TRUE(r.session().finalized);
+  ASSERT_TRUE(r.session().frame_count);
+  EXPECT_EQ(*r.session().frame_count, indices.size());
+  EXPECT_EQ(r.session().device.serial, want.device.serial);
+  EXPECT_EQ(r.session().K.dist, want.K.dist);
+  EXPECT_EQ(r.session().unit_m, want.unit_m);
+  EXPECT_EQ(r.session().created, want.created);
+  ASSERT_EQ(r.frame_count(), indices.size());
+  for (std::size_t i = 0; i < indices.size(); ++i)
+    expect_frame_equals(r.read_frame(i), test::fixture_frame(want, indices[i], true));
+  EXPECT_TRUE(r.color_file(0).empty());
+  EXPECT_THROW(r.read_frame(indices.size()), std::out_of_range);
+
+  // The files are what the format says: 16-bit grayscale PNGs readable by OpenCV directly.
+  cv::Mat png = cv::imread((dir / "depth/000000.png").string(), cv::IMREAD_ANYDEPTH);
+  ASSERT_EQ(png.type(), CV_16UC1);
+  EXPECT_EQ(png.at<std::uint16_t>(5, 7), test::fixture_depth(3, 7, 5));
+  const std::string csv = slurp(dir / "frames.csv");
+  EXPECT_EQ(csv.substr(0, csv.find('\n')), kFramesCsvHeader);
+  EXPECT_NE(csv.find("\n9,1299997,5300006000,depth/000003.png,,confidence/000003.png,0\n"),
+            std::string::npos)
+      << csv;
+  fs::remove_all(dir);
+}
+
+TEST(RecordingReaderTest, WriterValidatesFrames) {
+  const auto dir = test::make_temp_dir("rec_writer_checks");
+  const SessionMetadata s = test::fixture_session();
+  RecordingWriter w(dir, s);
+  w.write(test::fixture_frame(s, 5, false));
+  EXPECT_THROW(w.write(test::fixture_frame(s, 5, false)), InputError);  // index not increasing
+  RangeFrame wrong_size = test::fixture_frame(s, 6, false);
+  wrong_size.depth = Image<std::uint16_t>(8, 8, 100);
+  EXPECT_THROW(w.write(wrong_size), InputError);
+  RangeFrame wrong_unit = test::fixture_frame(s, 6, false);
+  wrong_unit.depth_unit_m = 0.001;
+  EXPECT_THROW(w.write(wrong_unit), InputError);
+  RangeFrame empty = test::fixture_frame(s, 6, false);
+  empty.depth = {};
+  EXPECT_THROW(w.write(empty), InputError);
+  EXPECT_EQ(w.frames_written(), 1u);
+  w.finish();
+  // A second writer on the same folder refuses to overwrite it.
+  EXPECT_THROW(RecordingWriter(dir, s), IoError);
+  EXPECT_EQ(RecordingReader(dir).frame_count(), 1u);
+  fs::remove_all(dir);
+}
+
+TEST(RecordingReaderTest, WritingAfterFinishReopensAndRefinalizes) {
+  const auto dir = test::make_temp_dir("rec_reopen");
+  const SessionMetadata s = test::fixture_session();
+  RecordingWriter w(dir, s);
+  w.write(test::fixture_frame(s, 0, false));
+  w.finish();
+  EXPECT_TRUE(read_session(dir).finalized);
+  w.write(test::fixture_frame(s, 1, false));
+  EXPECT_FALSE(read_session(dir).finalized);
+  EXPECT_EQ(RecordingReader(dir).frame_count(), 2u);
+  w.finish();
+  EXPECT_EQ(read_session(dir).frame_count, 2u);
+  fs::remove_all(dir);
+}
+
+TEST(RecordingReaderTest, UnfinishedRecordingIsReadable) {
+  const auto dir = test::make_temp_dir("rec_unfinished");
+  write_fixture(dir, {0, 1, 2}, false, /*finish=*/false);
+  RecordingReader r(dir);
+  EXPECT_FALSE(r.session().finalized);
+  EXPECT_EQ(r.frame_count(), 3u);
+  fs::remove_all(dir);
+}
+
+TEST(RecordingReaderTest, KilledWriterLeavesReadablePrefix) {
+  const auto dir = test::make_temp_dir("rec_killed");
+  const SessionMetadata s = test::fixture_session(64, 48);
+  pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    // Child: write frames until killed. _exit: never return into the test framework.
+    try {
+      RecordingWriter w(dir, s);
+      for (std::uint64_t i = 0; i < 100000; ++i) w.write(test::fixture_frame(s, i * 2, true));
+    } catch (...) {
+      ::_exit(3);
+    }
+    ::_exit(2);
+  }
+  // Parent: wait until at least 6 frame lines are on disk, then SIGKILL mid-stream.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  std::size_t lines = 0;
+  while (std::chrono::steady_clock::now() < deadline) {
+    const std::string csv = slurp(dir / "frames.csv");
+    lines = static_cast<std::size_t>(std::count(csv.begin(), csv.end(), '\n'));
+    if (lines >= 7) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ::kill(child, SIGKILL);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "writer exited by itself with status " << status;
+  ASSERT_GE(lines, 7u) << "writer too slow to produce 6 frames in 20 s";
+
+  RecordingReader r(dir);
+  EXPECT_FALSE(r.session().finalized);
+  ASSERT_GE(r.frame_count(), 6u);
+  for (std::size_t i = 0; i < r.frame_count(); ++i)
+    expect_frame_equals(r.read_frame(i), test::fixture_frame(s, i * 2, true));
+
+  // Same recording, made to look killed in the middle of a line, with that line's files gone:
+  // the reader stops at the last complete frame and says so.
+  std::string csv = slurp(dir / "frames.csv");
+  const std::size_t complete = r.frame_count();
+  const std::size_t last_nl = csv.rfind('\n', csv.size() - 2);
+  const std::string last_line = csv.substr(last_nl + 1);
+  csv = csv.substr(0, last_nl + 1) + last_line.substr(0, last_line.size() / 2);
+  spit(dir / "frames.csv", csv);
+  fs::remove(dir / ("depth/" + std::string(6 - std::to_string(complete - 1).size(), '0') +
+                    std::to_string(complete - 1) + ".png"));
+  RecordingReader r2(dir);
+  EXPECT_EQ(r2.frame_count(), complete - 1);
+  ASSERT_FALSE(r2.warnings().empty());
+  EXPECT_NE(r2.warnings().front().find("incomplete last line"), std::string::npos);
+  expect_frame_equals(r2.read_frame(complete - 2),
+                      test::fixture_frame(s, (complete - 2) * 2, true));
+  fs::remove_all(dir);
+}
+
+TEST(RecordingReaderTest, LastRowWithMissingFileIsDroppedOnlyWhenNotFinalized) {
+  const auto dir = test::make_temp_dir("rec_lastrow");
+  write_fixture(dir, {0, 1, 2}, false, /*finish=*/false);
+  fs::remove(dir / "depth/000002.png");
+  RecordingReader r(dir);
+  EXPECT_EQ(r.frame_count(), 2u);
+  EXPECT_EQ(r.warnings().size(), 1u);
+  fs::remove(dir / "depth/000001.png");  // now a row that is not the last one: an error
+  spit(dir / "frames.csv", slurp(dir / "frames.csv"));
+  try {
+    // Rows 0 and 1 reference existing/missing files; row 2 is dropped, row 1 is then missing.
+    RecordingReader bad(dir);
+    // Row 1 is not the last row (row 2 still is), so this must throw.
+    FAIL() << "accepted a missing file in the middle";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("000001.png"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("line 3"), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
+}
+
+//! Builds a valid finalized 3-frame recording, applies `corrupt`, and expects InputError naming
+//! `file_part` (and `needle`) either when opening or when reading every frame.
+void expect_corrupt_rejected(const std::function<void(const fs::path&)>& corrupt,
+                             const std::string& file_part, const std::string& needle) {
+  const auto dir = test::make_temp_dir("rec_corrupt");
+  write_fixture(dir, {0, 1, 2}, true);
+  corrupt(dir);
+  try {
+    RecordingReader r(dir);
+    for (std::size_t i = 0; i < r.frame_count(); ++i) r.read_frame(i);
+    ADD_FAILURE() << "accepted corruption expected to mention " << needle;
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(file_part), std::string::npos) << msg;
+    EXPECT_NE(msg.find(needle), std::string::npos) << msg;
+  }
+  fs::remove_all(dir);
+}
+
+void replace_in(const fs::path& file, const std::string& from, const std::string& to) {
+  std::string text = slurp(file);
+  const auto pos = text.find(from);
+  ASSERT_NE(pos, std::string::npos) << from;
+  text.replace(pos, from.size(), to);
+  spit(file, text);
+}
+
+TEST(RecordingReaderTest, MalformedRecordingsGiveInputErrorsNamingFileAndRow) {
+  expect_corrupt_rejected([](const fs::path& d) { fs::remove(d / "session.json"); }, "session.json",
+                          "missing");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {
+        replace_in(d / "session.json", "scanclean-rec/1", "scanclean-rec/7");
+      },
+      "session.json", "unsupported recording format");
+  expect_corrupt_rejected(
+      [](const fs::path& d) { replace_in(d / "session.json", "\"width\": 16", "\"width\": 1.5"); },
+      "session.json", "depth.width");
+  expect_corrupt_rejected(
+      [](const fs::path& d) { replace_in(d / "frames.csv", "index,device", "idx,device"); },
+      "frames.csv", "line 1: expected the header");
+  expect_corrupt_rejected([](const fs::path& d) { replace_in(d / "frames.csv", "\n1,", "\n1;"); },
+                          "frames.csv", "line 3: expected 7 comma-separated fields");
+  expect_corrupt_rejected([](const fs::path& d) { replace_in(d / "frames.csv", "\n1,", "\nx1,"); },
+                          "frames.csv", "line 3: field index");
+  expect_corrupt_rejected(
+      [](const fs::path& d) { replace_in(d / "frames.csv", ",1033333,", ",10e5,"); }, "frames.csv",
+      "line 3: field device_ts_us");
+  expect_corrupt_rejected(
+      [](const fs::path& d) { replace_in(d / "frames.csv", "\n2,", "\n1,"); }, "frames.csv",
+      "line 4: field index: expected a value greater than the previous row's 1");
+  expect_corrupt_rejected(
+      [](const fs::path& d) { replace_in(d / "frames.csv", "depth/000001.png", "../000001.png"); },
+      "frames.csv", "line 3: field depth");
+  expect_corrupt_rejected([](const fs::path& d) { fs::remove(d / "depth/000000.png"); },
+                          "depth/000000.png", "missing (referenced by");
+  expect_corrupt_rejected([](const fs::path& d) { fs::remove(d / "confidence/000002.png"); },
+                          "confidence/000002.png", "frames.csv line 4");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // finalized, yet a row less than frame_count
+        std::string csv = slurp(d / "frames.csv");
+        csv.erase(csv.rfind('\n', csv.size() - 2) + 1);
+        spit(d / "frames.csv", csv);
+      },
+      "frames.csv", "frame_count 3");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // finalized, yet a partial last line
+        std::string csv = slurp(d / "frames.csv");
+        csv.pop_back();
+        spit(d / "frames.csv", csv);
+      },
+      "frames.csv", "line 4: last line is incomplete");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // an 8-bit PNG where depth belongs
+        cv::imwrite((d / "depth/000001.png").string(), cv::Mat(12, 16, CV_8UC1, cv::Scalar(7)));
+      },
+      "depth/000001.png", "8-bit grayscale");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // a 3-channel 16-bit PNG
+        cv::imwrite((d / "depth/000001.png").string(), cv::Mat(12, 16, CV_16UC3, cv::Scalar(7)));
+      },
+      "depth/000001.png", "16-bit RGB");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // right format, wrong size
+        cv::imwrite((d / "depth/000002.png").string(), cv::Mat(10, 16, CV_16UC1, cv::Scalar(7)));
+      },
+      "depth/000002.png", "is 16x10, expected 16x12");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // truncated PNG data
+        std::string png = slurp(d / "depth/000001.png");
+        spit(d / "depth/000001.png", png.substr(0, png.size() / 2));
+      },
+      "depth/000001.png", "frames.csv line 3");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {
+        spit(d / "confidence/000000.png", "GIF89a not a png at all.......");
+      },
+      "confidence/000000.png", "PNG");
+}
+
+}  // namespace
+}  // namespace scanclean
