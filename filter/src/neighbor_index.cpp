@@ -4,6 +4,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <limits>
 #include <mutex>
@@ -146,6 +147,44 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
       ++h;
     }
   }
+  // Occupied neighbours of every cell (27-neighbourhood), in a fixed order.
+  const std::size_t nc = keys.size();
+  std::vector<std::array<std::uint32_t, 27>> adj(nc);
+  std::vector<std::uint8_t> adj_n(nc, 0);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nc, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t c = r.begin(); c < r.end(); ++c) {
+          const std::uint64_t k = keys[c];
+          const auto x = static_cast<std::int32_t>(k & 0x1fffff);
+          const auto y = static_cast<std::int32_t>((k >> 21) & 0x1fffff);
+          const auto z = static_cast<std::int32_t>((k >> 42) & 0x1fffff);
+          std::uint8_t m = 0;
+          for (std::int32_t dz = -1; dz <= 1; ++dz)
+            for (std::int32_t dy = -1; dy <= 1; ++dy)
+              for (std::int32_t dx = -1; dx <= 1; ++dx) {
+                const std::int32_t a = x + dx, b = y + dy, e = z + dz;
+                if (a < 0 || b < 0 || e < 0 || a >= dims_[0] || b >= dims_[1] || e >= dims_[2])
+                  continue;
+                const std::int64_t cc = find_cell(detail::cell_key(a, b, e));
+                if (cc >= 0) adj[c][m++] = static_cast<std::uint32_t>(cc);
+              }
+          std::sort(adj[c].begin(), adj[c].begin() + m);
+          adj_n[c] = m;
+        }
+      });
+  adj_begin_.resize(nc + 1);
+  adj_begin_[0] = 0;
+  for (std::size_t c = 0; c < nc; ++c) adj_begin_[c + 1] = adj_begin_[c] + adj_n[c];
+  adj_.resize(adj_begin_[nc]);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nc, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t c = r.begin(); c < r.end(); ++c)
+          std::copy(adj[c].begin(), adj[c].begin() + adj_n[c], adj_.begin() + adj_begin_[c]);
+      });
+  // The fast path needs |cell(p) - cell(q)| <= 1 for |p - q| < r, under float rounding of the
+  // cell coordinates (about dims x 2^-23 cells): keep r below the cell by that margin.
+  const double max_dim = std::max({dims_[0], dims_[1], dims_[2]});
+  cell_f_ = static_cast<float>(cell_ * (1.0 - 1e-5 - 4.0 * max_dim / 8388608.0));
 }
 
 NeighborIndex::~NeighborIndex() = default;

@@ -192,7 +192,8 @@ struct KernelSet {
 struct Params {
   const FilterOptions* o = nullptr;
   bool oriented = false;
-  double cell = 0;  // grid cell (h, or median h_i)
+  double cell = 0;              // grid cell (h, or median h_i)
+  double gather_factor = 1.25;  // candidate radius / h
 };
 
 // Builds the kernels of all points of d. `nref` receives each point's kernel normal (zero if it
@@ -243,7 +244,7 @@ KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params&
   std::vector<Eigen::Vector3f> cs(members.size());
   for (std::size_t k = 0; k < members.size(); ++k) cs[k] = centre[members[k]];
   std::vector<Eigen::Vector3f>().swap(centre);
-  ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell);
+  ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell * prm.gather_factor * 1.001);
   const std::size_t m = members.size();
   ks.q.resize(6 * m);
   ks.n.resize(3 * m);
@@ -369,14 +370,13 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
     const double nb_len = nb.norm();
     nb = nb_len > 1e-12 * s.s ? Eigen::Vector3d(nb / nb_len) : nref.cast<double>();
     const double mu = m.dot(nb);
-    double step_len;
-    if (o.update == UpdateMode::kNormal) {
+    // Both updates stop on the normal part |mu| (eq. 10 on the normal part, ALGORITHM.md 3):
+    // the tangential part of m never dies out.
+    if (o.update == UpdateMode::kNormal)
       x -= mu * nb;
-      step_len = std::abs(mu);
-    } else {
+    else
       x -= m;
-      step_len = m.norm();
-    }
+    const double step_len = std::abs(mu);
     ++iters;
     nbar_out = nb.cast<float>();
     if (step_len < tol) {
@@ -645,7 +645,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       double h0 = median_of(kth);
       if (!(h0 > 0)) h0 = fallback_h;  // at least K_h + 1 coincident points
       st.h0 = h0;
-      index = std::make_unique<NeighborIndex>(pf, h0);
+      index = std::make_unique<NeighborIndex>(pf, h0 * 1.001);
       // Noise: median sqrt(lambda_3) of the PCA at h0 over the same sample.
       std::vector<double> sig(M, -1.0);
       in.h = h0;
@@ -685,7 +685,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   if (o.scale != ScaleMode::kAdaptive) st.h_min = st.h_max = h;
   st.mean_spacing = h / std::sqrt(static_cast<double>(K) / M_PI);
   st.merge_eps = o.merge_eps < 0 ? 0.25 * st.mean_spacing : o.merge_eps;
-  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), h);
+  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), h * 1.001);
   std::vector<Eigen::Vector3f>().swap(pf);
   // Spatial sort: process and store everything in grid order.
   const std::vector<std::uint32_t> src = index->order();
@@ -716,6 +716,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   prm.o = &o;
   prm.oriented = use_v;
   prm.cell = h;
+  prm.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
   std::vector<Eigen::Vector3d> x = d.p;  // projected positions (data order)
   Projected pr;
   {
@@ -750,7 +751,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       for (std::uint32_t i : sub) d2.w.push_back(d.w[i]);
     if (!d.hi.empty())
       for (std::uint32_t i : sub) d2.hi.push_back(d.hi[i]);
-    NeighborIndex index2(std::move(pf2), h);
+    NeighborIndex index2(std::move(pf2), prm.cell * 1.001);
     std::vector<Eigen::Vector3f> nref2;
     KernelSet ks2 = build_kernels<false>(d2, index2, prm, nref2, "kernels (pass 2)");
     st.seconds_kernels += since(t);
@@ -806,49 +807,57 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   report(o, "outliers", 0);
   const std::size_t R = cl.seed.size();
   std::vector<std::uint8_t> rep_drop(R, 0);  // 0 keep, else flag
-  if (R > 0 && o.tau > 0) {
+  if (R > 0 && (o.tau > 0 || o.remove_small_components)) {
     std::vector<Eigen::Vector3f> rf(R);
     parallel_each(R, [&](std::size_t r) { rf[r] = cl.position[r].cast<float>(); });
-    NeighborIndex ridx(std::move(rf), h);
-    std::vector<double> rho(R, 0.0);
-    parallel_each(R, [&](std::size_t r) {
-      const double hr = d.hi_at(cl.seed[r]);
-      std::uint64_t sum = 0;
-      ridx.for_each_within(ridx.point(static_cast<std::uint32_t>(r)), static_cast<float>(hr),
-                           [&](std::uint32_t q, float) { sum += cl.count[q]; });
-      rho[r] = static_cast<double>(sum);
+    NeighborIndex ridx(std::move(rf), prm.cell * 1.001);
+    // Work in the index's slot order (spatially coherent).
+    const std::vector<std::uint32_t>& rord = ridx.order();
+    std::vector<std::uint32_t> cnt(R);
+    std::vector<float> hs(R);
+    parallel_each(R, [&](std::size_t s) {
+      cnt[s] = cl.count[rord[s]];
+      hs[s] = static_cast<float>(d.hi_at(cl.seed[rord[s]]));
     });
-    const double threshold = o.tau * median_of(rho);
-    for (std::size_t r = 0; r < R; ++r)
-      if (rho[r] < threshold) rep_drop[r] = kFlagOutlier;
+    std::vector<std::uint8_t> drop(R, 0);
+    if (o.tau > 0) {
+      std::vector<double> rho(R, 0.0);
+      parallel_each(R, [&](std::size_t s) {
+        std::uint64_t sum = 0;
+        ridx.for_each_slot_within(ridx.slot_point(s), hs[s],
+                                  [&](std::uint32_t q, float) { sum += cnt[q]; });
+        rho[s] = static_cast<double>(sum);
+      });
+      const double threshold = o.tau * median_of(rho);
+      for (std::size_t s = 0; s < R; ++s)
+        if (rho[s] < threshold) drop[s] = kFlagOutlier;
+    }
     report(o, "outliers", 0.5);
     if (o.remove_small_components) {
       std::vector<std::uint32_t> parent(R);
       std::iota(parent.begin(), parent.end(), 0u);
-      for (std::size_t r = 0; r < R; ++r) {
-        if (rep_drop[r]) continue;
-        const double hr = d.hi_at(cl.seed[r]);
-        ridx.for_each_within(ridx.point(static_cast<std::uint32_t>(r)), static_cast<float>(hr),
-                             [&](std::uint32_t q, float) {
-                               if (q <= r || rep_drop[q]) return;
-                               const std::uint32_t a =
-                                   find_root(parent, static_cast<std::uint32_t>(r));
-                               const std::uint32_t b = find_root(parent, q);
-                               if (a != b) parent[std::max(a, b)] = std::min(a, b);
-                             });
+      for (std::size_t s = 0; s < R; ++s) {
+        if (drop[s]) continue;
+        ridx.for_each_slot_within(ridx.slot_point(s), hs[s], [&](std::uint32_t q, float) {
+          if (q <= s || drop[q]) return;
+          const std::uint32_t a = find_root(parent, static_cast<std::uint32_t>(s));
+          const std::uint32_t b = find_root(parent, q);
+          if (a != b) parent[std::max(a, b)] = std::min(a, b);
+        });
       }
       std::vector<std::uint64_t> size(R, 0);
-      for (std::size_t r = 0; r < R; ++r)
-        if (!rep_drop[r]) size[find_root(parent, static_cast<std::uint32_t>(r))] += cl.count[r];
+      for (std::size_t s = 0; s < R; ++s)
+        if (!drop[s]) size[find_root(parent, static_cast<std::uint32_t>(s))] += cnt[s];
       const std::uint64_t min_size =
           o.min_component_size > 0
               ? o.min_component_size
               : std::max<std::uint64_t>(static_cast<std::uint64_t>(o.k_min),
                                         static_cast<std::uint64_t>(std::ceil(1e-3 * N)));
-      for (std::size_t r = 0; r < R; ++r)
-        if (!rep_drop[r] && size[find_root(parent, static_cast<std::uint32_t>(r))] < min_size)
-          rep_drop[r] = kFlagOutlier | 8;  // 8: internal mark "small component"
+      for (std::size_t s = 0; s < R; ++s)
+        if (!drop[s] && size[find_root(parent, static_cast<std::uint32_t>(s))] < min_size)
+          drop[s] = kFlagOutlier | 8;  // 8: internal mark "small component"
     }
+    for (std::size_t s = 0; s < R; ++s) rep_drop[rord[s]] = drop[s];
   }
 
   // ----- outputs -----------------------------------------------------------------------------

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <set>
@@ -114,6 +116,306 @@ TEST(RobustFilterTest, DeterministicForAnyThreadCount) {
     EXPECT_EQ(at.values, attr(b.cloud, at.name).values) << at.name;
   EXPECT_EQ(attr(a.outliers, "source_index").values, attr(b.outliers, "source_index").values);
   expect_accounting(c, a);
+}
+
+// Two parallel sheets z = 0 and z = gap, `n` points each, noise-free, sensor normals +z / -z
+// (the second sheet faces the other way, as the two sides of a thin plate do).
+PointCloud two_sheets(std::size_t n, double gap, std::uint32_t seed) {
+  PointCloud a = test::noisy_plane(n, 1.0, 0.0, seed);
+  PointCloud b = test::noisy_plane(n, 1.0, 0.0, seed + 1);
+  for (auto& p : b.positions) p.z() = gap;
+  for (auto& v : b.normals) v = Eigen::Vector3f(0, 0, -1);
+  append(a, b);
+  return a;
+}
+
+// Share of output points within `tol` of z = z0.
+double share_near(const PointCloud& c, double z0, double tol) {
+  std::size_t k = 0;
+  for (const auto& p : c.positions) k += std::abs(p.z() - z0) < tol ? 1 : 0;
+  return static_cast<double>(k) / static_cast<double>(std::max<std::size_t>(1, c.size()));
+}
+
+TEST(RobustFilterTest, UniformOutliersAreRemovedAndInliersKept) {
+  PointCloud c = test::noisy_plane(20000, 1.0, 0.002, 6);  // seed 6
+  c.normals.clear();
+  const std::size_t inliers = c.size();
+  const auto added = test::add_uniform_outliers(c, 1000, -0.5, 0.5, 7);  // seed 7: 5 %
+  const FilterResult r = robust_filter(c, no_merge());
+  std::set<std::size_t> removed;
+  for (double s : attr(r.outliers, "source_index").values)
+    removed.insert(static_cast<std::size_t>(s));
+  // Outliers that fell into the surface band (|z| < h) are indistinguishable from surface
+  // points; recall is measured on the others.
+  std::size_t far = 0, far_removed = 0;
+  for (std::size_t i : added) {
+    if (std::abs(c.positions[i].z()) < r.stats.h) continue;
+    ++far;
+    far_removed += removed.count(i);
+  }
+  std::size_t inliers_kept = 0;
+  for (double s : attr(r.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
+  EXPECT_GT(far, 900u);
+  EXPECT_GE(static_cast<double>(far_removed), 0.99 * far);
+  EXPECT_GE(static_cast<double>(inliers_kept), 0.99 * inliers);
+  EXPECT_GT(r.stats.unsupported + r.stats.low_density, 0u);
+  expect_accounting(c, r);
+}
+
+TEST(RobustFilterTest, SheetsAGapOfHApartStayApartAndCloserOnesMerge) {
+  FilterOptions o = no_merge();
+  o.scale = ScaleMode::kFixed;
+  o.h = 0.05;
+  o.use_sensor_normals = false;
+  {
+    const PointCloud c = two_sheets(6000, 1.0 * o.h, 8);  // seed 8
+    const FilterResult r = robust_filter(c, o);
+    EXPECT_GT(share_near(r.cloud, 0.0, 0.1 * o.h), 0.45);
+    EXPECT_GT(share_near(r.cloud, o.h, 0.1 * o.h), 0.45);
+    expect_accounting(c, r);
+  }
+  {
+    const PointCloud c = two_sheets(6000, 0.3 * o.h, 9);  // seed 9
+    const FilterResult r = robust_filter(c, o);
+    // Collapsed into one layer about the middle (the documented limit).
+    EXPECT_GT(share_near(r.cloud, 0.15 * o.h, 0.1 * o.h), 0.9);
+    EXPECT_LT(share_near(r.cloud, 0.0, 0.03 * o.h), 0.1);
+    EXPECT_LT(share_near(r.cloud, 0.3 * o.h, 0.03 * o.h), 0.1);
+  }
+}
+
+TEST(RobustFilterTest, SensorNormalsKeepTheSidesOfAThinPlateApart) {
+  FilterOptions o = no_merge();
+  o.scale = ScaleMode::kFixed;
+  o.h = 0.05;
+  const PointCloud c = two_sheets(6000, 0.3 * o.h, 10);  // seed 10
+  o.use_sensor_normals = true;
+  const FilterResult with = robust_filter(c, o);
+  EXPECT_GT(share_near(with.cloud, 0.0, 0.05 * o.h), 0.45);
+  EXPECT_GT(share_near(with.cloud, 0.3 * o.h, 0.05 * o.h), 0.45);
+  o.use_sensor_normals = false;
+  const FilterResult without = robust_filter(c, o);
+  EXPECT_LT(share_near(without.cloud, 0.0, 0.05 * o.h), 0.05);
+}
+
+TEST(RobustFilterTest, ZeroWeightKernelsContributeNothing) {
+  FilterOptions o = no_merge();
+  o.scale = ScaleMode::kFixed;
+  o.h = 0.05;
+  o.use_sensor_normals = false;
+  PointCloud c = two_sheets(5000, 1.2 * o.h, 11);  // seed 11
+  // Sheet B (the second half) given weight 0: its kernels vanish, so its points lose all
+  // support (sheet A is beyond the slab) and sheet A is filtered exactly as without B.
+  c.confidences.assign(c.size(), 1.0f);
+  for (std::size_t i = 5000; i < c.size(); ++i) c.confidences[i] = 0.0f;
+  const FilterResult r = robust_filter(c, o);
+  EXPECT_EQ(r.stats.unsupported, 5000u);
+  for (double s : attr(r.cloud, "source_index").values) EXPECT_LT(s, 5000);
+  PointCloud a = c;
+  a.positions.resize(5000);
+  a.normals.resize(5000);
+  a.confidences.resize(5000);
+  const FilterResult ra = robust_filter(a, o);
+  ASSERT_EQ(ra.cloud.size(), r.cloud.size());
+  for (std::size_t k = 0; k < r.cloud.size(); ++k)
+    EXPECT_NEAR((ra.cloud.positions[k] - r.cloud.positions[k]).norm(), 0.0, 1e-6 * o.h);
+  // With weight 1 the second sheet stays.
+  c.confidences.assign(c.size(), 1.0f);
+  EXPECT_LT(robust_filter(c, o).stats.unsupported, 10u);
+  // Weights change the likelihood: half weights give half of L.
+  a.confidences.assign(a.size(), 0.5f);
+  const FilterResult half = robust_filter(a, o);
+  EXPECT_NEAR(attr(half.cloud, "likelihood").values[0],
+              0.5 * attr(ra.cloud, "likelihood").values[0],
+              1e-4 * attr(ra.cloud, "likelihood").values[0]);
+}
+
+TEST(RobustFilterTest, AdaptiveKernelsHandleTenfoldDensityChange) {
+  // Left half 10x denser than the right half; noise proportional to the local spacing.
+  std::mt19937 rng(12);  // seed 12
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> g(0.0, 1.0);
+  PointCloud c;
+  for (int i = 0; i < 20000; ++i) c.positions.emplace_back(-u(rng), u(rng), 0.002 * g(rng));
+  for (int i = 0; i < 2000; ++i) c.positions.emplace_back(u(rng), u(rng), 0.006 * g(rng));
+  FilterOptions o = no_merge();
+  o.scale = ScaleMode::kAdaptive;
+  const FilterResult r = robust_filter(c, o);
+  EXPECT_GT(r.stats.h_max, 2.5 * r.stats.h_min);
+  double in_l = 0, in_r = 0, out_l = 0, out_r = 0;
+  std::size_t nl = 0, nr = 0;
+  for (const auto& p : c.positions) (p.x() < 0 ? in_l : in_r) += p.z() * p.z();
+  for (const auto& p : r.cloud.positions) {
+    if (std::abs(p.x()) < 0.15) continue;  // leave the density step aside
+    (p.x() < 0 ? out_l : out_r) += p.z() * p.z();
+    (p.x() < 0 ? nl : nr) += 1;
+  }
+  EXPECT_LT(std::sqrt(out_l / nl) * 3, std::sqrt(in_l / 20000));
+  EXPECT_LT(std::sqrt(out_r / nr) * 3, std::sqrt(in_r / 2000));
+  EXPECT_GT(r.cloud.size(), 0.98 * c.size());
+  expect_accounting(c, r);
+}
+
+TEST(RobustFilterTest, DegenerateInputsGiveDocumentedResults) {
+  {  // empty
+    const FilterResult r = robust_filter(PointCloud{});
+    EXPECT_EQ(r.cloud.size(), 0u);
+    EXPECT_EQ(r.outliers.size(), 0u);
+  }
+  {  // all points equal: one representative holding all of them
+    PointCloud c;
+    c.positions.assign(100, Eigen::Vector3d(1, 2, 3));
+    const FilterResult r = robust_filter(c);
+    ASSERT_EQ(r.cloud.size(), 1u);
+    EXPECT_EQ(attr(r.cloud, "merge_count").values[0], 100);
+    EXPECT_LT((r.cloud.positions[0] - Eigen::Vector3d(1, 2, 3)).norm(), 1e-9);
+    expect_accounting(c, r);
+  }
+  {  // collinear points stay on their line
+    PointCloud c;
+    for (int i = 0; i < 1000; ++i) c.positions.emplace_back(0.001 * i, 0.002 * i, 1.0);
+    const FilterResult r = robust_filter(c, no_merge());
+    EXPECT_GT(r.cloud.size(), 900u);
+    for (const auto& p : r.cloud.positions) {
+      EXPECT_NEAR(p.z(), 1.0, 1e-6);
+      EXPECT_NEAR(p.y(), 2 * p.x(), 1e-6);
+    }
+    expect_accounting(c, r);
+  }
+  {  // fewer points than k_min: no kernels, everything unsupported
+    PointCloud c = test::noisy_plane(5, 1.0, 0.0, 13);  // seed 13
+    const FilterResult r = robust_filter(c);
+    EXPECT_EQ(r.cloud.size(), 0u);
+    EXPECT_EQ(r.outliers.size(), 5u);
+    EXPECT_EQ(r.stats.unsupported, 5u);
+    for (double f : attr(r.outliers, "flags").values) EXPECT_EQ(f, kFlagUnsupported);
+  }
+  {                                                       // NaN coordinate
+    PointCloud c = test::noisy_plane(100, 1.0, 0.0, 14);  // seed 14
+    c.positions[42].x() = std::numeric_limits<double>::quiet_NaN();
+    try {
+      robust_filter(c);
+      ADD_FAILURE() << "no exception";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("point 42"), std::string::npos) << e.what();
+    }
+  }
+  {                                                       // confidence outside [0, 1]
+    PointCloud c = test::noisy_plane(100, 1.0, 0.0, 15);  // seed 15
+    c.confidences.assign(100, 1.0f);
+    c.confidences[7] = 2.0f;
+    EXPECT_THROW(robust_filter(c), InputError);
+  }
+}
+
+TEST(RobustFilterTest, ValidateRejectsEachBadOption) {
+  EXPECT_NO_THROW(validate(FilterOptions{}));
+  struct Case {
+    std::string name;
+    std::function<void(FilterOptions&)> set;
+  };
+  const std::vector<Case> cases = {
+      {"h", [](FilterOptions& o) { o.scale = ScaleMode::kFixed; }},
+      {"h", [](FilterOptions& o) { o.h = -1; }},
+      {"h",
+       [](FilterOptions& o) {
+         o.scale = ScaleMode::kFixed;
+         o.h = std::nan("");
+       }},
+      {"k_h", [](FilterOptions& o) { o.k_h = 1; }},
+      {"k_adaptive", [](FilterOptions& o) { o.k_adaptive = 5000; }},
+      {"k_min", [](FilterOptions& o) { o.k_min = 2; }},
+      {"truncation_sigma", [](FilterOptions& o) { o.truncation_sigma = 0; }},
+      {"slab", [](FilterOptions& o) { o.slab = -1; }},
+      {"eigen_floor", [](FilterOptions& o) { o.eigen_floor = 2; }},
+      {"tolerance", [](FilterOptions& o) { o.tolerance = 0; }},
+      {"max_iterations", [](FilterOptions& o) { o.max_iterations = 0; }},
+      {"max_iterations", [](FilterOptions& o) { o.max_iterations = 300; }},
+      {"passes", [](FilterOptions& o) { o.passes = 3; }},
+      {"merge_eps",
+       [](FilterOptions& o) { o.merge_eps = std::numeric_limits<double>::infinity(); }},
+      {"tau", [](FilterOptions& o) { o.tau = 1.5; }},
+      {"tau", [](FilterOptions& o) { o.tau = -0.1; }},
+      {"threads", [](FilterOptions& o) { o.threads = -1; }},
+      {"min_component_size", [](FilterOptions& o) { o.min_component_size = 10000000000ULL; }},
+  };
+  for (const auto& c : cases) {
+    FilterOptions o;
+    c.set(o);
+    try {
+      validate(o);
+      ADD_FAILURE() << c.name << " accepted";
+    } catch (const OptionError& e) {
+      EXPECT_NE(std::string(e.what()).find(c.name), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("expected"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(robust_filter(test::noisy_plane(10, 1, 0, 1), o), OptionError);
+  }
+}
+
+TEST(RobustFilterTest, VectorUpdateAlsoConvergesOnThePlane) {
+  PointCloud c = test::noisy_plane(10000, 1.0, 0.003, 16);  // seed 16
+  c.normals.clear();
+  FilterOptions o = no_merge();
+  o.update = UpdateMode::kVector;
+  const FilterResult r = robust_filter(c, o);
+  EXPECT_LT(rms_z(r.cloud) * 3, rms_z(c));
+  EXPECT_LT(r.stats.not_converged, c.size() / 20);
+  EXPECT_LT(r.stats.mean_iterations, 10);
+  expect_accounting(c, r);
+}
+
+TEST(RobustFilterTest, ClusteringMergesAndCountsMembers) {
+  PointCloud c = test::noisy_plane(10000, 1.0, 0.002, 17);  // seed 17
+  c.normals.clear();
+  FilterOptions o;
+  o.merge_eps = -1;  // default 0.25 s
+  const FilterResult def = robust_filter(c, o);
+  EXPECT_NEAR(def.stats.merge_eps, 0.25 * def.stats.mean_spacing, 1e-12);
+  o.merge_eps = 0.6 * def.stats.mean_spacing;
+  const FilterResult r = robust_filter(c, o);
+  EXPECT_LT(r.cloud.size(), def.cloud.size());
+  EXPECT_LT(r.cloud.size(), 0.9 * c.size());
+  EXPECT_GT(r.stats.merged, 0u);
+  const auto& mc = attr(r.cloud, "merge_count").values;
+  EXPECT_GT(*std::max_element(mc.begin(), mc.end()), 1);
+  expect_accounting(c, r);
+  expect_accounting(c, def);
+  // No two representatives closer than eps can both come from converged, mergeable points...
+  // ...but each representative is within eps of its seed's projection (non-chaining).
+  EXPECT_EQ(r.stats.merged, c.size() - r.cloud.size() - r.outliers.size());
+}
+
+TEST(RobustFilterTest, SecondPassKeepsAccountingAndSmoothsFurther) {
+  PointCloud c = test::noisy_plane(10000, 1.0, 0.004, 18);  // seed 18
+  c.normals.clear();
+  FilterOptions o = no_merge();
+  const FilterResult one = robust_filter(c, o);
+  o.passes = 2;
+  const FilterResult two = robust_filter(c, o);
+  EXPECT_LT(rms_z(two.cloud), rms_z(one.cloud) * 1.05);
+  EXPECT_LT(rms_z(two.cloud) * 3, rms_z(c));
+  expect_accounting(c, two);
+}
+
+TEST(RobustFilterTest, SmallComponentsAreRemovedOnRequest) {
+  PointCloud c = test::noisy_plane(20000, 1.0, 0.001, 19);  // seed 19
+  c.normals.clear();
+  // A tight clump of 12 points far from the plane: dense enough for its own kernels and for
+  // the density test, but a component smaller than max(k_min, 1e-3 N) = 20.
+  std::mt19937 rng(20);  // seed 20
+  std::normal_distribution<double> g(0.0, 0.002);
+  for (int i = 0; i < 12; ++i) c.positions.emplace_back(g(rng), g(rng), 0.4 + 0.0001 * g(rng));
+  FilterOptions o = no_merge();
+  const FilterResult keep = robust_filter(c, o);
+  std::size_t clump_kept = 0;
+  for (const auto& p : keep.cloud.positions) clump_kept += p.z() > 0.3 ? 1 : 0;
+  EXPECT_EQ(clump_kept, 12u);
+  o.remove_small_components = true;
+  const FilterResult drop = robust_filter(c, o);
+  for (const auto& p : drop.cloud.positions) EXPECT_LT(p.z(), 0.3);
+  EXPECT_EQ(drop.stats.small_components, 12u);
+  expect_accounting(c, drop);
 }
 
 }  // namespace

@@ -69,6 +69,9 @@ class NeighborIndex {
   std::vector<std::uint32_t> ids_;         // original index of pts_[s]
   std::vector<std::uint32_t> inv_;         // sorted slot of original index i
   std::vector<std::uint32_t> cell_begin_;  // per occupied cell, +1 sentinel
+  std::vector<std::uint32_t> adj_begin_;   // per occupied cell: range in adj_, +1 sentinel
+  std::vector<std::uint32_t> adj_;         // occupied cells among the 27 around each cell
+  float cell_f_ = 0;                       // cell, slightly reduced for the fast-path test
   std::vector<std::uint64_t> hash_keys_;   // open addressing, ~0 = empty
   std::vector<std::uint32_t> hash_cells_;
   std::uint64_t hash_mask_ = 0;
@@ -95,6 +98,28 @@ void NeighborIndex::visit(const Eigen::Vector3f& q, float r, F& f) const {
   if (pts_.empty() || !(r > 0)) return;
   const float r2 = r * r;
   std::int32_t lo[3], hi[3];
+  if (grid_ && r <= cell_f_) {
+    // Fast path: every point within r lies in the 27 cells around q's cell, whose occupied
+    // members are precomputed per cell.
+    std::int32_t c3[3];
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) {
+      const float c = std::floor((q[a] - lo_[a]) * inv_cell_);
+      inside = inside && c >= 0 && c <= static_cast<float>(dims_[a] - 1);
+      c3[a] = inside ? static_cast<std::int32_t>(c) : 0;
+    }
+    const std::int64_t cq = inside ? find_cell(detail::cell_key(c3[0], c3[1], c3[2])) : -1;
+    if (cq >= 0) {
+      for (std::uint32_t k = adj_begin_[cq], ke = adj_begin_[cq + 1]; k < ke; ++k) {
+        const std::uint32_t c = adj_[k];
+        for (std::uint32_t s = cell_begin_[c], e = cell_begin_[c + 1]; s < e; ++s) {
+          const float d2 = (pts_[s] - q).squaredNorm();
+          if (d2 < r2) f(kSlots ? s : ids_[s], d2);
+        }
+      }
+      return;
+    }
+  }
   bool grid = grid_;
   for (int a = 0; a < 3 && grid; ++a) {
     const float l = std::floor((q[a] - r - lo_[a]) * inv_cell_);

@@ -27,8 +27,11 @@ enum class ScaleMode {
 
 //! The projection step.
 enum class UpdateMode {
-  kNormal,  //!< x <- x - (m . n_bar) n_bar, stop when |m . n_bar| < tolerance h (default)
-  kVector,  //!< the paper's literal x <- x - m, stop when |m| < tolerance h
+  kNormal,  //!< x <- x - (m . n_bar) n_bar (default)
+  kVector,  //!< the paper's literal x <- x - m
+  // Both stop when |m . n_bar| < tolerance h_i: the tangential part of m (about 1e-4 h per
+  // iteration, from the spread of the n_j) never dies out, so the literal test on |m| would
+  // send most points to the iteration cap.
 };
 
 //! Options of robust_filter(). Lengths in metres. Checked by validate().
