@@ -119,7 +119,7 @@ SessionMetadata session_from_info(const SourceInfo& info, int width, int height)
   s.height = height;
   s.unit_m = info.depth_unit_m;
   s.K = info.K;
-  if (!info.K.valid()) {
+  if (!(info.K.fx > 0 && info.K.fy > 0)) {  // no usable intrinsics: store zeros, keep the origin
     s.K = Intrinsics{};
     s.K.source = info.K.source;
   }

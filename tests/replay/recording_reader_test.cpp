@@ -25,7 +25,8 @@ namespace fs = std::filesystem;
 void write_fixture(const fs::path& dir, const std::vector<std::uint64_t>& indices, bool confidence,
                    bool finish = true) {
   const SessionMetadata s = test::fixture_session();
-  RecordingWriter w(dir, s);
+  // No fsync of the index: these tests are about content, not power loss, and stay fast.
+  RecordingWriter w(dir, s, RecordingWriterOptions{false});
   for (std::uint64_t i : indices) w.write(test::fixture_frame(s, i, confidence));
   EXPECT_EQ(w.frames_written(), indices.size());
   if (finish) w.finish();

@@ -56,9 +56,9 @@ struct SessionMetadata {
 };
 
 //! Session metadata for recording frames of `info` whose depth images are width x height.
-//! Copies device, intrinsics (K.width/K.height set to width/height; when info.K is not valid the
-//! intrinsics stay zero), unit, noise model and PS1080 constants. \throw OptionError when
-//! width or height is not positive.
+//! Copies device, intrinsics (K.width/K.height set to width/height; when info.K has no positive
+//! fx/fy the intrinsics are stored as zeros), unit, noise model and PS1080 constants. \throw
+//! OptionError when width or height is not positive.
 SessionMetadata session_from_info(const SourceInfo& info, int width, int height);
 
 //! The SourceInfo a replay of this session presents: kind "recording", the given uri, the
