@@ -46,6 +46,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   FilterRun run;
   run.seconds_wall = std::chrono::duration<double>(t1 - t0).count();
   run.kept.assign(input.size(), 0);
+  run.input_to_output.assign(input.size(), -1);
   const Attribute* src = r.cloud.find_attribute("source_index");
   if (src == nullptr) throw std::logic_error("robust_filter output lacks source_index");
   if (settings.merge) {
@@ -56,7 +57,11 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
     if (osrc == nullptr) throw std::logic_error("robust_filter outliers lack source_index");
     for (double v : osrc->values) run.kept[static_cast<std::size_t>(v)] = 0;
   } else {
-    for (double v : src->values) run.kept[static_cast<std::size_t>(v)] = 1;
+    for (std::size_t o = 0; o < src->values.size(); ++o) {
+      const auto i = static_cast<std::size_t>(src->values[o]);
+      run.kept[i] = 1;
+      run.input_to_output[i] = static_cast<std::int64_t>(o);
+    }
   }
   const FilterStats& s = r.stats;
   run.h = s.h;

@@ -22,9 +22,10 @@ struct FilterSettings {
 };
 
 struct FilterRun {
-  PointCloud cloud;                //!< filtered points (with the filter's attributes)
-  std::vector<std::uint8_t> kept;  //!< per input point: 1 = represented in the output
-  double seconds_wall = 0;         //!< measured around the call
+  PointCloud cloud;                           //!< filtered points (with the filter's attributes)
+  std::vector<std::uint8_t> kept;             //!< per input point: 1 = represented in the output
+  std::vector<std::int64_t> input_to_output;  //!< per input point: its output point (-1: none)
+  double seconds_wall = 0;                    //!< measured around the call
   // FilterStats, copied so that callers need not see the filter header.
   double h = 0, noise_sigma = 0, mean_iterations = 0, p95_iterations = 0;
   std::size_t unsupported = 0, low_density = 0, small_components = 0, merged = 0, not_converged = 0;

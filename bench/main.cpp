@@ -87,6 +87,20 @@ int run(int argc, char** argv) {
   app.add_option("--bunny-mesh", bunny_mesh, "ground-truth mesh (PLY)")->capture_default_str();
   app.add_option("--bunny-conf", bunny_conf, "Stanford .conf of the real bunny scans")
       ->capture_default_str();
+  bool self_test = false;
+  std::size_t tune_n = 0;
+  app.add_flag("--self-test", self_test,
+               "check the harness itself (sampling, noise, metrics, outlier labels, baselines) "
+               "against known answers and exit (0 = all passed)");
+  app.add_option("--tune", tune_n,
+                 "print the peers' CD/P2M over a grid of neighbourhood sizes at this N on a "
+                 "tuning set (seed + 1000) and exit");
+  std::size_t wlop_max_n = 10000;
+  app.add_option("--wlop-max-n", wlop_max_n,
+                 "run CGAL WLOP (slow) only for N up to this (0 = at every size)")
+      ->capture_default_str();
+  double tune_sigma = 0;
+  app.add_option("--tune-sigma", tune_sigma, "with --tune: only this noise level (0 = all)");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
   app.add_option("--speed-n", speed_n, "internal: points of the speed measurement")->group("");
   try {
@@ -94,6 +108,8 @@ int run(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : static_cast<int>(ExitCode::kBadOptions);
   }
+  if (self_test) return self_test_main(seed);
+  if (tune_n > 0) return tune_main(tune_n, seed + 1000, tune_sigma);
   if (!speed_child.empty()) return speed_child_main(speed_child, speed_n, seed, threads);
 
   std::unique_ptr<tbb::global_control> limit;
@@ -104,6 +120,7 @@ int run(int argc, char** argv) {
   ctx.quick = quick;
   ctx.threads = threads;
   ctx.seed = seed;
+  ctx.wlop_max_n = wlop_max_n;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

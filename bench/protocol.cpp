@@ -113,7 +113,9 @@ GroundTruth::GroundTruth(const Shape& shape, std::vector<Eigen::Vector3d> clean,
 }
 
 Metrics evaluate(const GroundTruth& gt, const std::vector<Eigen::Vector3d>& output,
-                 const Instance* instance, const std::vector<std::uint8_t>* kept) {
+                 const Classification& cls) {
+  const Instance* instance = cls.instance;
+  const std::vector<std::uint8_t>* kept = cls.kept;
   Metrics m;
   m.n_out = output.size();
   if (instance != nullptr && kept != nullptr) {
@@ -127,6 +129,9 @@ Metrics evaluate(const GroundTruth& gt, const std::vector<Eigen::Vector3d>& outp
         if (out) ++removed_out;
       } else if (!out) {
         ++kept_in;
+      } else {
+        m.farthest_kept_outlier =
+            std::max(m.farthest_kept_outlier, gt.shape().distance(instance->input[i]));
       }
       if (!out) ++inliers;
     }
@@ -137,6 +142,19 @@ Metrics evaluate(const GroundTruth& gt, const std::vector<Eigen::Vector3d>& outp
                    ? static_cast<double>(removed_out) / static_cast<double>(instance->outlier_count)
                    : 1.0;
     m.retention = inliers ? static_cast<double>(kept_in) / inliers : 1.0;
+    if (cls.input_to_output != nullptr) {
+      std::size_t neutralised = 0;
+      for (std::size_t i = 0; i < kept->size(); ++i) {
+        if (!instance->is_outlier[i]) continue;
+        const std::int64_t o = (*cls.input_to_output)[i];
+        if (o < 0 || gt.shape().distance(output[static_cast<std::size_t>(o)]) <= cls.near_surface)
+          ++neutralised;
+      }
+      m.effective_recall =
+          instance->outlier_count
+              ? static_cast<double>(neutralised) / static_cast<double>(instance->outlier_count)
+              : 1.0;
+    }
   }
   if (output.empty()) {
     m.cd = m.p2m = m.mean_dist = m.p95_dist = m.rms_dist = std::nan("");

@@ -4,6 +4,7 @@
 //! quality metrics (CD, P2M, point-to-surface statistics, coverage, outlier classification).
 
 #include <Eigen/Core>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -72,17 +73,30 @@ struct Metrics {
   // Outlier classification (only when labels are given).
   bool classified = false;
   std::size_t removed = 0;
-  double precision = 0;  //!< removed outliers / removed points (1 if nothing removed)
-  double recall = 0;     //!< removed outliers / injected outliers
-  double retention = 0;  //!< kept inliers / inliers
+  double precision = 0;              //!< removed outliers / removed points (1 if nothing removed)
+  double recall = 0;                 //!< removed outliers / injected outliers
+  double retention = 0;              //!< kept inliers / inliers
+  double farthest_kept_outlier = 0;  //!< largest surface distance of a kept injected outlier
+  //! Share of injected outliers that are removed OR whose output point ends up within
+  //! `near_surface` of the true surface (a filter that projects an outlier onto the surface has
+  //! neutralised it); only when the input -> output map is given.
+  double effective_recall = std::nan("");
 };
 
-//! Metrics of `output` against the ground truth. If `kept` is given (one flag per input point of
-//! `instance`: 1 = the method kept it), the outlier classification is filled in. Deterministic;
+//! Outlier classification inputs for evaluate().
+struct Classification {
+  const Instance* instance = nullptr;
+  const std::vector<std::uint8_t>* kept = nullptr;  //!< per input point: 1 = kept
+  //! Optional: per input point, the index of its output point (-1 if removed).
+  const std::vector<std::int64_t>* input_to_output = nullptr;
+  double near_surface = 0;  //!< distance for effective_recall
+};
+
+//! Metrics of `output` against the ground truth. If classification.instance and .kept are given,
+//! the outlier classification is filled in. Deterministic;
 //! parallel inside.
 Metrics evaluate(const GroundTruth& gt, const std::vector<Eigen::Vector3d>& output,
-                 const Instance* instance = nullptr,
-                 const std::vector<std::uint8_t>* kept = nullptr);
+                 const Classification& classification = {});
 
 //! Normalises points in place: bounding-box centre to the origin, farthest point at radius 1.
 void normalise_unit_sphere(std::vector<Eigen::Vector3d>& points);

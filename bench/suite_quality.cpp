@@ -24,7 +24,7 @@ struct Method {
   std::function<Points(const Points&)> run;
 };
 
-std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads) {
+std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool with_wlop) {
   std::vector<Method> m;
   if (filter_available()) {
     FilterSettings fs;
@@ -43,12 +43,13 @@ std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads) {
                  return cgal_bilateral_smooth(in, ps.bilateral_k, ps.bilateral_sharpness,
                                               ps.bilateral_iterations);
                }});
-  m.push_back({"CGAL wlop",
-               "select " + fmt(ps.wlop_select_percentage, 0) + " %, radius default (8 x avg " +
-                   "spacing), " + std::to_string(ps.wlop_iterations) + " it.",
-               [ps](const Points& in) {
-                 return cgal_wlop(in, ps.wlop_select_percentage, -1, ps.wlop_iterations);
-               }});
+  if (with_wlop)
+    m.push_back({"CGAL wlop",
+                 "select " + fmt(ps.wlop_select_percentage, 0) + " %, radius default (8 x avg " +
+                     "spacing), " + std::to_string(ps.wlop_iterations) + " it.",
+                 [ps](const Points& in) {
+                   return cgal_wlop(in, ps.wlop_select_percentage, -1, ps.wlop_iterations);
+                 }});
   m.push_back({"PCA-plane projection", "k=" + std::to_string(ps.pca_k),
                [ps](const Points& in) { return pca_plane_projection(in, ps.pca_k); }});
   return m;
@@ -86,7 +87,8 @@ void run_quality_suite(Context& ctx) {
     for (std::size_t si = 0; si < sigmas.size(); ++si) {
       const double sigma = sigmas[si];
       const PeerSettings ps = peer_settings(sigma, n);
-      auto methods = smoothing_methods(ps, ctx.threads);
+      const bool with_wlop = ctx.wlop_max_n == 0 || n <= ctx.wlop_max_n;
+      auto methods = smoothing_methods(ps, ctx.threads, with_wlop);
       for (const auto& m : methods)
         settings.rows.push_back({fmt_count(n), fmt(sigma, 2), m.name, m.settings});
       for (std::size_t shi = 0; shi < shapes.size(); ++shi) {
@@ -140,6 +142,9 @@ void run_quality_suite(Context& ctx) {
   std::ostringstream shapes_list;
   for (std::size_t i = 0; i < shapes.size(); ++i)
     shapes_list << (i ? ", " : "") << shapes[i]->name();
+  if (ctx.wlop_max_n != 0 && sizes.back() > ctx.wlop_max_n)
+    avg.notes.push_back("CGAL wlop was run only up to N = " + fmt_count(ctx.wlop_max_n) +
+                        " (--wlop-max-n; it takes about a minute per 50k instance here).");
   avg.notes.push_back("Shapes averaged: " + shapes_list.str() + ".");
   avg.notes.push_back(
       "CD = mean squared NN distance output -> clean GT sample (the N noise-free points) + clean "

@@ -20,6 +20,7 @@ struct Context {
   std::filesystem::path self_exe;    //!< this program (speed runs re-execute it)
   std::filesystem::path bunny_mesh;  //!< recordings/bunny/bun_zipper.ply
   std::filesystem::path bunny_conf;  //!< ../shared/data/stanford_bunny/data/bun.conf
+  std::size_t wlop_max_n = 10000;    //!< WLOP (slow) runs only up to this N (0 = always)
   std::vector<Table> tables;
   std::vector<std::string> messages;  //!< skipped parts and other remarks for the report
   void add(Table t);
@@ -46,6 +47,11 @@ void run_quality_suite(Context& ctx);
 void run_outlier_suite(Context& ctx);
 void run_speed_suite(Context& ctx);
 void run_real_suite(Context& ctx);
+
+//! --self-test: checks of the harness against oracles; returns the exit code (0 = all passed).
+int self_test_main(std::uint64_t seed);
+//! --tune: the peers' neighbourhood sizes on a tuning set (seed distinct from the protocol's).
+int tune_main(std::size_t n, std::uint64_t seed, double only_sigma);
 
 //! Entry point of a speed measurement child process (see suite_speed.cpp). Returns the exit code.
 int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads);
