@@ -1,0 +1,309 @@
+// The OpenNI2 source, recorder and virtual-sensor driver through the real OpenNI2 API, with the
+// private driver folder <build>/oni (virtual sensor + OniFile player). No hardware needed.
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <thread>
+
+#include "openni2_fixtures.h"
+#include "scanclean/core/errors.h"
+#include "scanclean/drivers/openni2_source.h"
+#include "support/data_paths.h"
+
+namespace scanclean {
+namespace {
+
+using namespace std::chrono_literals;
+using test::vs_mismatches;
+using test::write_vs_fixture;
+
+std::unique_ptr<RangeSource> open_source(const std::string& uri, OpenNI2Options o = {}) {
+  auto s = make_openni2_source(uri, o);
+  s->open();
+  return s;
+}
+
+TEST(OpenNI2SourceTest, VirtualSensorServesFolderBitExact) {
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec");
+  auto src = open_source("vsensor://" + fx.folder.string() + "?pace=manual");
+  const SourceInfo info = src->info();
+  EXPECT_EQ(info.kind, "vsensor");
+  EXPECT_EQ(info.vendor, "scanclean");
+  EXPECT_EQ(info.serial, "SN-FIXTURE-1");
+  ASSERT_TRUE(info.frame_count.has_value());
+  EXPECT_EQ(*info.frame_count, 5u);
+  EXPECT_FALSE(info.is_live);
+  EXPECT_EQ(info.noise_model, "none");
+  // FOV round trip (float properties): hfov = 2 atan(W / (2 fx)) -> fx again.
+  ASSERT_TRUE(info.K.valid());
+  EXPECT_EQ(info.K.width, 160);
+  EXPECT_EQ(info.K.height, 120);
+  EXPECT_NEAR(info.K.fx, 200.0, 1e-3);
+  EXPECT_NEAR(info.K.fy, 200.0, 1e-3);
+  EXPECT_DOUBLE_EQ(info.K.cx, 80.0);
+  EXPECT_DOUBLE_EQ(info.K.cy, 60.0);
+
+  RangeFrame f;
+  for (std::size_t i = 0; i < fx.indices.size(); ++i) {
+    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << "frame " << i << ": " << src->last_error();
+    EXPECT_EQ(f.index, fx.indices[i]);
+    EXPECT_EQ(f.device_ts_us, fx.timestamps_us[i]);
+    EXPECT_GT(f.host_ts_ns, 0);
+    EXPECT_DOUBLE_EQ(f.depth_unit_m, 0.001);
+    ASSERT_EQ(f.depth.width, 160);
+    ASSERT_EQ(f.depth.height, 120);
+    EXPECT_EQ(vs_mismatches(f, fx.indices[i]), 0u) << "frame " << i;
+    EXPECT_NEAR(f.K.fx, 200.0, 1e-3);
+  }
+  EXPECT_EQ(src->next(f, 100ms), ReadStatus::kEndOfStream);
+  EXPECT_EQ(src->next(f, 100ms), ReadStatus::kEndOfStream);
+}
+
+TEST(OpenNI2SourceTest, DepthUnitAndPs1080ConstantsComeFromTheRecording) {
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 2, 160, 120, 0.0001, true);
+  auto src = open_source("vsensor://" + fx.folder.string());
+  const SourceInfo info = src->info();
+  EXPECT_DOUBLE_EQ(info.depth_unit_m, 0.0001);
+  ASSERT_TRUE(info.ps1080.has_value());
+  EXPECT_DOUBLE_EQ(info.ps1080->zpd_mm, 120.0);
+  EXPECT_DOUBLE_EQ(info.ps1080->zpps_mm, 0.1042);
+  EXPECT_DOUBLE_EQ(info.ps1080->lddis_cm, 7.5);
+  EXPECT_DOUBLE_EQ(info.ps1080->param_coeff, 4.0);
+  EXPECT_EQ(info.noise_model, "nguyen2012");
+  RangeFrame f;
+  ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << src->last_error();
+  EXPECT_DOUBLE_EQ(f.depth_unit_m, 0.0001);
+  EXPECT_EQ(vs_mismatches(f, fx.indices[0]), 0u);
+}
+
+TEST(OpenNI2SourceTest, DroppedFramesShowAsIndexGaps) {
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 6);
+  for (const auto& [query, expected] :
+       std::vector<std::pair<std::string, std::vector<std::uint64_t>>>{
+           {"drop=1,4", {10, 12, 13, 15}}, {"drop=every3", {10, 11, 13, 14}}}) {
+    auto src = open_source("vsensor://" + fx.folder.string() + "?" + query);
+    std::vector<std::uint64_t> got;
+    RangeFrame f;
+    ReadStatus s;
+    while ((s = src->next(f, 2000ms)) == ReadStatus::kOk) {
+      got.push_back(f.index);
+      EXPECT_EQ(vs_mismatches(f, f.index), 0u);
+    }
+    EXPECT_EQ(s, ReadStatus::kEndOfStream) << query << ": " << src->last_error();
+    EXPECT_EQ(got, expected) << query;
+  }
+}
+
+TEST(OpenNI2SourceTest, DisconnectIsReportedAndReopenWorks) {
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 6);
+  auto src = open_source("vsensor://" + fx.folder.string() + "?disconnect_after=3");
+  RangeFrame f;
+  for (int round = 0; round < 2; ++round) {
+    for (int i = 0; i < 3; ++i) {
+      ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << "round " << round << " frame " << i;
+      EXPECT_EQ(f.index, fx.indices[i]);
+    }
+    EXPECT_EQ(src->next(f, 200ms), ReadStatus::kDisconnected);
+    EXPECT_NE(src->last_error().find("disconnected"), std::string::npos) << src->last_error();
+    EXPECT_EQ(src->next(f, 10ms), ReadStatus::kDisconnected);
+    src->close();
+    src->open();  // a fresh device: the recording plays again from the start
+  }
+}
+
+TEST(OpenNI2SourceTest, ConsecutiveTimeoutsCountAsDisconnect) {
+  // Realtime pace with loop: an endless live-like stream at 30 fps. Waits of 0 ms are shorter
+  // than the frame period, so `disconnect_timeouts` consecutive waits time out.
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 3);
+  OpenNI2Options o;
+  o.disconnect_timeouts = 3;
+  auto src = open_source("vsensor://" + fx.folder.string() + "?pace=realtime&loop=1", o);
+  RangeFrame f;
+  std::uint64_t previous = 0;
+  for (int i = 0; i < 5; ++i) {  // looping continues the index sequence: 10..14
+    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << src->last_error();
+    if (i > 0) {
+      EXPECT_EQ(f.index, previous + 1);
+    }
+    previous = f.index;
+    EXPECT_EQ(vs_mismatches(f, fx.indices[i % 3]), 0u);
+  }
+  ReadStatus s = ReadStatus::kOk;
+  for (int i = 0; i < 3 && s != ReadStatus::kDisconnected; ++i) {
+    s = src->next(f, 0ms);
+    if (s == ReadStatus::kOk) i = -1;  // a frame was already pending; start counting again
+  }
+  EXPECT_EQ(s, ReadStatus::kDisconnected);
+}
+
+TEST(OpenNI2SourceTest, RealtimePaceFollowsTimestamps) {
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 5);
+  auto src = open_source("vsensor://" + fx.folder.string() + "?pace=realtime");
+  RangeFrame f;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<std::int64_t> host;
+  for (int i = 0; i < 5; ++i) {
+    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << src->last_error();
+    EXPECT_EQ(f.index, fx.indices[i]);
+    host.push_back(f.host_ts_ns);
+  }
+  const double elapsed =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // 4 steps of 33.367 ms: at least ~0.13 s (real time), not instantaneous.
+  EXPECT_GE(elapsed, 0.12);
+  EXPECT_EQ(src->next(f, 300ms), ReadStatus::kEndOfStream);
+}
+
+TEST(OpenNI2SourceTest, RecordOniThenPlayBackBitExact) {
+  const auto dir = test::make_temp_dir("oni");
+  const auto fx = write_vs_fixture(dir / "rec", 8);
+  const auto oni = dir / "x.oni";
+  const std::size_t written =
+      record_oni("vsensor://" + fx.folder.string(), oni, 0, 0, [] { return true; });
+  EXPECT_EQ(written, 8u);
+  ASSERT_TRUE(std::filesystem::exists(oni));
+
+  auto src = open_source(oni.string());
+  const SourceInfo info = src->info();
+  EXPECT_EQ(info.kind, "oni");
+  ASSERT_TRUE(info.frame_count.has_value());
+  EXPECT_EQ(*info.frame_count, 8u);
+  EXPECT_NEAR(info.K.fx, 200.0, 1e-3);  // the FOV was recorded (xnFOV)
+  RangeFrame f;
+  for (int i = 0; i < 8; ++i) {
+    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << "frame " << i << ": " << src->last_error();
+    // The OniFile player renumbers frames 1..N and rebases timestamps to 0, keeping the steps.
+    EXPECT_EQ(f.index, static_cast<std::uint64_t>(i + 1));
+    EXPECT_EQ(f.device_ts_us, fx.timestamps_us[i] - fx.timestamps_us[0]);
+    EXPECT_EQ(vs_mismatches(f, fx.indices[i]), 0u) << "frame " << i;
+  }
+  EXPECT_EQ(src->next(f, 200ms), ReadStatus::kEndOfStream);
+  EXPECT_EQ(src->next(f, 50ms), ReadStatus::kEndOfStream);
+}
+
+TEST(OpenNI2SourceTest, RecordOniStopsAtMaxFrames) {
+  const auto dir = test::make_temp_dir("oni");
+  const auto fx = write_vs_fixture(dir / "rec", 6);
+  const auto oni = dir / "y.oni";
+  EXPECT_EQ(record_oni("vsensor://" + fx.folder.string(), oni, 4, 0, {}), 4u);
+  auto src = open_source(oni.string());
+  EXPECT_EQ(src->info().frame_count.value_or(0), 4u);
+  EXPECT_THROW(record_oni("vsensor://" + fx.folder.string(), dir / "z.oni", 0, 0, {}), OptionError);
+}
+
+TEST(OpenNI2SourceTest, MissingInputsAreInputErrors) {
+  const auto dir = test::make_temp_dir("missing");
+  try {
+    open_source((dir / "nothere.oni").string());
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("nothere.oni"), std::string::npos) << e.what();
+  }
+  try {
+    open_source("vsensor://" + (dir / "norec").string());
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("norec"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(make_openni2_source("x.oni", OpenNI2Options{false, -1}), OptionError);
+}
+
+TEST(OpenNI2SourceTest, NoSensorInPrivateFolderIsUnavailable) {
+  // <build>/oni holds only the virtual sensor (not announced) and the .oni player.
+  try {
+    open_source("openni2://");
+    FAIL() << "expected UnavailableError";
+  } catch (const UnavailableError& e) {
+    EXPECT_NE(std::string(e.what()).find("no depth sensor found"), std::string::npos) << e.what();
+  }
+}
+
+TEST(OpenNI2SourceTest, AnnouncedVirtualSensorIsTheDefaultDevice) {
+  ASSERT_EQ(setenv("VSENSOR_ANNOUNCE", "1", 1), 0);
+  const OpenNI2DeviceList list = list_openni2_devices();
+  std::unique_ptr<RangeSource> src;
+  try {
+    src = open_source("openni2://");
+  } catch (...) {
+    unsetenv("VSENSOR_ANNOUNCE");
+    throw;
+  }
+  unsetenv("VSENSOR_ANNOUNCE");
+  ASSERT_TRUE(list.initialized) << list.error;
+  ASSERT_EQ(list.devices.size(), 1u);
+  EXPECT_EQ(list.devices[0].uri, "vsensor://default");
+  EXPECT_NE(std::find(list.drivers.begin(), list.drivers.end(), "libScancleanVirtualSensor.so.0"),
+            list.drivers.end());
+  EXPECT_EQ(src->info().kind, "vsensor");
+  EXPECT_EQ(src->info().K.width, 640);
+  RangeFrame f;
+  ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << src->last_error();
+  EXPECT_EQ(f.depth.width, 640);
+  EXPECT_EQ(f.index, 1u);
+  src->close();
+  // Without the variable nothing is announced again.
+  EXPECT_TRUE(list_openni2_devices().devices.empty());
+}
+
+TEST(OpenNI2SourceTest, RealOpenNI1RecordingPlaysCompletely) {
+  const auto file = test::recordings_dir() / "oni" / "3dj_test.oni";
+  ASSERT_TRUE(std::filesystem::exists(file)) << file;
+  auto src = open_source(file.string());
+  const SourceInfo info = src->info();
+  EXPECT_EQ(info.kind, "oni");
+  ASSERT_TRUE(info.frame_count.has_value());
+  EXPECT_EQ(*info.frame_count, 12u);
+  ASSERT_TRUE(info.K.valid());
+  EXPECT_EQ(info.K.width, 640);
+  EXPECT_EQ(info.K.height, 480);
+  const double hfov = 2 * std::atan(640 / (2 * info.K.fx));
+  const double vfov = 2 * std::atan(480 / (2 * info.K.fy));
+  EXPECT_NEAR(hfov, 1.014469, 1e-5);
+  EXPECT_NEAR(vfov, 0.789809, 1e-5);
+  RangeFrame f;
+  std::vector<std::int64_t> ts;
+  std::size_t valid_sum = 0;
+  for (int i = 0; i < 12; ++i) {
+    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << "frame " << i << ": " << src->last_error();
+    EXPECT_EQ(f.index, static_cast<std::uint64_t>(i + 1));
+    EXPECT_DOUBLE_EQ(f.depth_unit_m, 0.001);
+    std::size_t valid = 0;
+    for (auto d : f.depth.data) valid += d != 0;
+    EXPECT_GT(valid, 200000u);
+    EXPECT_LT(valid, 270000u);
+    valid_sum += valid;
+    ts.push_back(f.device_ts_us);
+  }
+  for (std::size_t i = 1; i < ts.size(); ++i) EXPECT_NEAR(ts[i] - ts[i - 1], 33369, 300);
+  EXPECT_EQ(src->next(f, 200ms), ReadStatus::kEndOfStream);
+  EXPECT_EQ(src->next(f, 50ms), ReadStatus::kEndOfStream);
+  std::printf(
+      "3dj_test.oni: frames=12 hfov=%.6f vfov=%.6f fx=%.3f mean_valid=%zu "
+      "ts_step_first=%lld ts_step_last=%lld noise_model=%s ps1080=%s vendor='%s' "
+      "name='%s'\n",
+      hfov, vfov, info.K.fx, valid_sum / 12, static_cast<long long>(ts[1] - ts[0]),
+      static_cast<long long>(ts[11] - ts[10]), info.noise_model.c_str(), info.ps1080 ? "yes" : "no",
+      info.vendor.c_str(), info.name.c_str());
+  if (info.ps1080)
+    std::printf("3dj_test.oni ps1080: zpd=%g zpps=%g lddis=%g coeff=%g\n", info.ps1080->zpd_mm,
+                info.ps1080->zpps_mm, info.ps1080->lddis_cm, info.ps1080->param_coeff);
+}
+
+TEST(OpenNI2SourceTest, RepeatedOpenCloseCycles) {
+  const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 2);
+  for (int cycle = 0; cycle < 3; ++cycle) {
+    auto src = open_source("vsensor://" + fx.folder.string());
+    RangeFrame f;
+    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << "cycle " << cycle;
+    EXPECT_EQ(vs_mismatches(f, fx.indices[0]), 0u);
+  }
+}
+
+}  // namespace
+}  // namespace scanclean
