@@ -10,25 +10,17 @@
 
 namespace scanclean::detail {
 
-void CandidateBuffer::push(unsigned kernel_slot, const float v[15]) {
-  if (count + kCandidatePad > f[0].size()) {
-    const std::size_t cap = std::max<std::size_t>(64, 2 * (count + kCandidatePad));
-    for (auto& a : f) a.resize(cap);
-    d.resize(cap);
-    slot.resize(cap);
-  }
-  for (std::size_t k = 0; k < 15; ++k) f[k][count] = v[k];
-  slot[count] = kernel_slot;
-  ++count;
+void CandidateBuffer::reserve(std::size_t n) {
+  const std::size_t cap = n + 2 * kCandidatePadding;
+  if (f[0].size() >= cap) return;
+  for (auto& a : f) a.resize(cap);
+  d.resize(cap);
+  slot.resize(cap);
 }
 
 void CandidateBuffer::finish() {
-  if (f[0].size() < kCandidatePad) {
-    for (auto& a : f) a.resize(64);
-    d.resize(64);
-    slot.resize(64);
-  }
-  padded = (count + kCandidatePad - 1) / kCandidatePad * kCandidatePad;
+  reserve(count);
+  padded = (count + kCandidatePadding - 1) / kCandidatePadding * kCandidatePadding;
   for (std::size_t j = count; j < padded; ++j) {
     for (std::size_t k = 0; k < kFields; ++k) f[k][j] = 0;
     f[kSlab2][j] = -1;  // never kept
@@ -69,8 +61,8 @@ template <class V, class VI>
 }
 
 template <class V, class VI>
-[[gnu::always_inline]] inline bool step_impl(CandidateBuffer& b, const float x[3], float t2,
-                                             StepSums& out) {
+[[gnu::always_inline]] inline bool step_impl(CandidateBuffer& b, const float x[3],
+                                             const float nref[3], float t2, StepSums& out) {
   constexpr int W = sizeof(V) / sizeof(float);
   const float inf = std::numeric_limits<float>::infinity();
   const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
@@ -102,6 +94,7 @@ template <class V, class VI>
   if (!(emin < inf)) return false;
   V as{}, adx{}, ady{}, adz{}, anx{}, any{}, anz{};
   const V emv = V{} + emin;
+  const V rx = V{} + nref[0], ry = V{} + nref[1], rz = V{} + nref[2];
   for (std::size_t j = 0; j < n; j += W) {
     const V em = load<V, VI>(e_out + j);
     const VI kept = em < inf;
@@ -114,13 +107,14 @@ template <class V, class VI>
     const V ny = load<V, VI>(&b.f[CandidateBuffer::kNy][j]);
     const V nz = load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
     const V od = om * d;
+    const V os = (nx * rx + ny * ry + nz * rz) < 0.0f ? -om : om;  // s_j omega_j
     as += om;
     adx += od * nx;
     ady += od * ny;
     adz += od * nz;
-    anx += om * nx;
-    any += om * ny;
-    anz += om * nz;
+    anx += os * nx;
+    any += os * ny;
+    anz += os * nz;
   }
   out = StepSums{};
   out.e_min = emin;
@@ -172,15 +166,16 @@ typedef int VI4 __attribute__((vector_size(16)));
 typedef float V8 __attribute__((vector_size(32)));
 typedef int VI8 __attribute__((vector_size(32)));
 
-[[gnu::target("avx2,fma")]] bool step_avx2(CandidateBuffer& b, const float x[3], float t2,
-                                           StepSums& out) {
-  return step_impl<V8, VI8>(b, x, t2, out);
+[[gnu::target("avx2,fma")]] bool step_avx2(CandidateBuffer& b, const float x[3],
+                                           const float nref[3], float t2, StepSums& out) {
+  return step_impl<V8, VI8>(b, x, nref, t2, out);
 }
 [[gnu::target("avx2,fma")]] double likelihood_avx2(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V8, VI8>(b, x, t2);
 }
-bool step_sse(CandidateBuffer& b, const float x[3], float t2, StepSums& out) {
-  return step_impl<V4, VI4>(b, x, t2, out);
+bool step_sse(CandidateBuffer& b, const float x[3], const float nref[3], float t2,
+              StepSums& out) {
+  return step_impl<V4, VI4>(b, x, nref, t2, out);
 }
 double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V4, VI4>(b, x, t2);
@@ -193,8 +188,9 @@ bool have_avx2() {
 
 }  // namespace
 
-bool step_sums(CandidateBuffer& buffer, const float x[3], float t2, StepSums& out) {
-  return have_avx2() ? step_avx2(buffer, x, t2, out) : step_sse(buffer, x, t2, out);
+bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
+               StepSums& out) {
+  return have_avx2() ? step_avx2(buffer, x, nref, t2, out) : step_sse(buffer, x, nref, t2, out);
 }
 
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2) {

@@ -10,7 +10,9 @@
 
 namespace scanclean::detail {
 
-//! Struct of arrays, padded with inert entries to a multiple of kCandidatePad.
+//! Struct of arrays, padded with inert entries to a multiple of kCandidatePadding.
+constexpr std::size_t kCandidatePadding = 8;
+
 struct CandidateBuffer {
   static constexpr std::size_t kFields = 16;
   enum Field {
@@ -25,12 +27,14 @@ struct CandidateBuffer {
     kQ12,  // 2 x S^-1 off-diagonal
     kNx,
     kNy,
-    kNz,  // kernel normal (flipped to agree with the reference normal)
+    kNz,  // kernel normal (unoriented)
     kSlab2,
     kH2,
     kW,  // (slab h_j)^2, h_j^2, w_j
     kE   // scratch: masked Mahalanobis e_j
   };
+  //! Kernel record layout (16 floats, one cache line): c(3), S^-1 (6, as above), n(3), h2, w.
+  static constexpr std::size_t kRecord = 16;
   std::vector<float> f[kFields];
   std::vector<float> d;  // scratch: signed distances d_j
   std::size_t count = 0;
@@ -38,11 +42,22 @@ struct CandidateBuffer {
   std::vector<unsigned> slot;  // kernel slot of each candidate
 
   void clear() { count = 0; }
-  void push(unsigned kernel_slot, const float v[15]);
-  void finish();  // pads to a multiple of kCandidatePad with inert entries
+  void reserve(std::size_t n);  // capacity for n candidates (+ padding)
+  //! Appends kernel `rec` (kRecord floats) with its centre made relative to `origin`.
+  void push_record(unsigned kernel_slot, const float* rec, const float origin[3], float slab2) {
+    if (count + kCandidatePadding >= f[0].size()) reserve(2 * count + 64);
+    const std::size_t j = count++;
+    f[kCx][j] = rec[0] - origin[0];
+    f[kCy][j] = rec[1] - origin[1];
+    f[kCz][j] = rec[2] - origin[2];
+    for (std::size_t k = 3; k < 12; ++k) f[k][j] = rec[k];
+    f[kSlab2][j] = slab2 * rec[12];
+    f[kH2][j] = rec[12];
+    f[kW][j] = rec[13];
+    slot[j] = kernel_slot;
+  }
+  void finish();  // pads to a multiple of kCandidatePadding with inert entries
 };
-
-constexpr std::size_t kCandidatePad = 8;
 
 struct StepSums {
   double s = 0;              // sum omega
@@ -52,8 +67,10 @@ struct StepSums {
 };
 
 //! One iteration's sums at x (relative to the local origin). Returns false if no kernel is kept
-//! (e_j < t2 and d_j^2 < slab2_j). Fills buffer.f[kE] and buffer.d.
-bool step_sums(CandidateBuffer& buffer, const float x[3], float t2, StepSums& out);
+//! (e_j < t2 and d_j^2 < slab2_j). Fills buffer.f[kE] and buffer.d. The normal sum uses
+//! s_j n_j with s_j = sign(n_j . nref).
+bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
+               StepSums& out);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
 //! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error ~1e-7).

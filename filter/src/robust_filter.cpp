@@ -182,11 +182,10 @@ bool fit_kernel(const Points& d, std::size_t i, double h, int k_min, bool orient
 // The frozen kernels of one pass, in the slot order of their centre index.
 struct KernelSet {
   std::unique_ptr<NeighborIndex> index;  // over centres (float, relative to the origin)
-  std::vector<float> q;                  // 6 per slot: S^-1 00 11 22, 2x 01 02 12 (1/m^2)
-  std::vector<float> n;                  // 3 per slot
-  std::vector<float> h2;                 // h_j^2
-  std::vector<float> w;                  // w_j
-  std::size_t fitted = 0;                // points that got a kernel (including w = 0)
+  // Per slot one record of CandidateBuffer::kRecord floats: c, S^-1 (00 11 22, 2x 01 02 12;
+  // 1/m^2), n, h_j^2, w_j.
+  std::vector<float> rec;
+  std::size_t fitted = 0;  // points that got a kernel (including w = 0)
 };
 
 struct Params {
@@ -203,9 +202,9 @@ KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params&
                         std::vector<Eigen::Vector3f>& nref, const std::string& phase) {
   const std::size_t n = d.p.size();
   const FilterOptions& o = *prm.o;
+  constexpr std::size_t R = detail::CandidateBuffer::kRecord;
   std::vector<std::uint8_t> valid(n, 0);
-  std::vector<Eigen::Vector3f> centre(n);
-  std::vector<std::array<float, 6>> q(n);
+  std::vector<float> rec(R * n, 0.0f);  // point order first
   nref.assign(n, Eigen::Vector3f::Zero());
   const double floor2 = o.eigen_floor * o.eigen_floor;
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
@@ -230,35 +229,54 @@ KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params&
     Eigen::Vector3d inv;
     for (int k = 0; k < 3; ++k) inv[k] = 1.0 / std::max(fit.lambda[k], floor2 * h2);
     const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
-    q[i] = {static_cast<float>(s_inv(0, 0)),     static_cast<float>(s_inv(1, 1)),
-            static_cast<float>(s_inv(2, 2)),     static_cast<float>(2 * s_inv(0, 1)),
-            static_cast<float>(2 * s_inv(0, 2)), static_cast<float>(2 * s_inv(1, 2))};
-    centre[i] = fit.c.cast<float>();
+    float* r = &rec[R * i];
+    for (int k = 0; k < 3; ++k) r[k] = static_cast<float>(fit.c[k]);
+    r[3] = static_cast<float>(s_inv(0, 0));
+    r[4] = static_cast<float>(s_inv(1, 1));
+    r[5] = static_cast<float>(s_inv(2, 2));
+    r[6] = static_cast<float>(2 * s_inv(0, 1));
+    r[7] = static_cast<float>(2 * s_inv(0, 2));
+    r[8] = static_cast<float>(2 * s_inv(1, 2));
+    for (int k = 0; k < 3; ++k) r[9 + k] = fit.n[k];
+    r[12] = static_cast<float>(h2);
+    r[13] = d.w_at(i);
     valid[i] = 1;
   });
   KernelSet ks;
   for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
-  std::vector<std::uint32_t> members;
-  for (std::size_t i = 0; i < n; ++i)
-    if (valid[i]) members.push_back(static_cast<std::uint32_t>(i));
-  std::vector<Eigen::Vector3f> cs(members.size());
-  for (std::size_t k = 0; k < members.size(); ++k) cs[k] = centre[members[k]];
-  std::vector<Eigen::Vector3f>().swap(centre);
+  // Compact the valid kernels (in place), index their centres, then permute the records in
+  // place into the index's slot order (cycle by cycle).
+  std::size_t m = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!valid[i]) continue;
+    if (m != i) std::copy_n(&rec[R * i], R, &rec[R * m]);
+    ++m;
+  }
+  std::vector<std::uint8_t>().swap(valid);
+  rec.resize(R * m);
+  rec.shrink_to_fit();
+  std::vector<Eigen::Vector3f> cs(m);
+  for (std::size_t k = 0; k < m; ++k) cs[k] = Eigen::Vector3f(rec[R * k], rec[R * k + 1], rec[R * k + 2]);
   ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell * prm.gather_factor * 1.001);
-  const std::size_t m = members.size();
-  ks.q.resize(6 * m);
-  ks.n.resize(3 * m);
-  ks.h2.resize(m);
-  ks.w.resize(m);
   const auto& order = ks.index->order();
-  parallel_each(m, [&](std::size_t s) {
-    const std::uint32_t i = members[order[s]];
-    for (int k = 0; k < 6; ++k) ks.q[6 * s + k] = q[i][k];
-    for (int k = 0; k < 3; ++k) ks.n[3 * s + k] = nref[i][k];
-    const double h = d.hi_at(i);
-    ks.h2[s] = static_cast<float>(h * h);
-    ks.w[s] = d.w_at(i);
-  });
+  std::vector<bool> done(m, false);
+  std::array<float, R> tmp;
+  for (std::size_t s0 = 0; s0 < m; ++s0) {
+    if (done[s0]) continue;
+    std::copy_n(&rec[R * s0], R, tmp.begin());
+    std::size_t s = s0;
+    while (true) {
+      done[s] = true;
+      const std::size_t from = order[s];
+      if (from == s0) {
+        std::copy_n(tmp.begin(), R, &rec[R * s]);
+        break;
+      }
+      std::copy_n(&rec[R * from], R, &rec[R * s]);
+      s = from;
+    }
+  }
+  ks.rec = std::move(rec);
   return ks;
 }
 
@@ -280,44 +298,34 @@ struct ProjectionContext {
 
 void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
             detail::CandidateBuffer& buf) {
+  constexpr std::size_t R = detail::CandidateBuffer::kRecord;
   const KernelSet& ks = *ctx.ks;
+  const float r = static_cast<float>(ctx.gather_factor * h), r2 = r * r;
+  const float origin[3] = {of.x(), of.y(), of.z()};
   buf.clear();
-  ks.index->for_each_slot_within(of, static_cast<float>(ctx.gather_factor * h),
-                                 [&](std::uint32_t s, float) {
-                                   const Eigen::Vector3f c = ks.index->slot_point(s) - of;
-                                   const float* q = &ks.q[6 * s];
-                                   const float* n = &ks.n[3 * s];
-                                   const float v[15] = {c.x(),
-                                                        c.y(),
-                                                        c.z(),
-                                                        q[0],
-                                                        q[1],
-                                                        q[2],
-                                                        q[3],
-                                                        q[4],
-                                                        q[5],
-                                                        n[0],
-                                                        n[1],
-                                                        n[2],
-                                                        ctx.slab2 * ks.h2[s],
-                                                        ks.h2[s],
-                                                        ks.w[s]};
-                                   buf.push(s, v);
-                                 });
-  buf.finish();
-}
-
-void orient(detail::CandidateBuffer& buf, const Eigen::Vector3f& nref) {
-  using B = detail::CandidateBuffer;
-  for (std::size_t j = 0; j < buf.count; ++j) {
-    const float dot =
-        buf.f[B::kNx][j] * nref.x() + buf.f[B::kNy][j] * nref.y() + buf.f[B::kNz][j] * nref.z();
-    if (dot < 0) {
-      buf.f[B::kNx][j] = -buf.f[B::kNx][j];
-      buf.f[B::kNy][j] = -buf.f[B::kNy][j];
-      buf.f[B::kNz][j] = -buf.f[B::kNz][j];
+  const float* rec = ks.rec.data();
+  const bool grid = ks.index->for_each_cell_run(of, r, [&](std::uint32_t b, std::uint32_t e) {
+    constexpr std::uint32_t kChunk = 64;
+    std::uint32_t hit[kChunk];
+    for (std::uint32_t s0 = b; s0 < e; s0 += kChunk) {
+      const std::uint32_t s1 = std::min(e, s0 + kChunk);
+      std::uint32_t n = 0;
+      for (std::uint32_t s = s0; s < s1; ++s) {  // branch-free selection
+        const float* k = rec + R * s;
+        const float dx = k[0] - origin[0], dy = k[1] - origin[1], dz = k[2] - origin[2];
+        hit[n] = s;
+        n += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
+      }
+      buf.reserve(buf.count + n);
+      for (std::uint32_t k = 0; k < n; ++k)
+        buf.push_record(hit[k], rec + R * hit[k], origin, ctx.slab2);
     }
-  }
+  });
+  if (!grid)
+    ks.index->for_each_slot_within(of, r, [&](std::uint32_t s, float) {
+      buf.push_record(s, rec + R * s, origin, ctx.slab2);
+    });
+  buf.finish();
 }
 
 // Projects x (in place) onto a maximum of L; eqs. 6-10 with the options' update rule.
@@ -332,7 +340,6 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
   gather(ctx, of, h, buf);
-  if (have_ref) orient(buf, nref);
   int iters = 0;
   bool converged = false;
   Eigen::Vector3f nbar_out = nref;
@@ -342,13 +349,12 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
       of = x.cast<float>();
       origin = of.cast<double>();
       gather(ctx, of, h, buf);
-      if (have_ref) orient(buf, nref);
     }
     const Eigen::Vector3d xl = x - origin;
     const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
                          static_cast<float>(xl.z())};
     detail::StepSums s;
-    if (!detail::step_sums(buf, xf, ctx.t2, s)) {
+    if (!detail::step_sums(buf, xf, nref.data(), ctx.t2, s)) {
       flags_out = kFlagUnsupported;
       iters_out = static_cast<std::uint8_t>(iters);
       L_out = 0;
@@ -362,8 +368,7 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
       while (best < buf.count && e[best] != s.e_min) ++best;
       nref = Eigen::Vector3f(buf.f[B::kNx][best], buf.f[B::kNy][best], buf.f[B::kNz][best]);
       have_ref = true;
-      orient(buf, nref);
-      detail::step_sums(buf, xf, ctx.t2, s);
+      detail::step_sums(buf, xf, nref.data(), ctx.t2, s);
     }
     const Eigen::Vector3d m(s.dn[0] / s.s, s.dn[1] / s.s, s.dn[2] / s.s);
     Eigen::Vector3d nb(s.n[0], s.n[1], s.n[2]);
@@ -717,13 +722,14 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   prm.oriented = use_v;
   prm.cell = h;
   prm.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
-  std::vector<Eigen::Vector3d> x = d.p;  // projected positions (data order)
+  std::vector<Eigen::Vector3d> x;  // projected positions (data order), initially d.p
   Projected pr;
   {
     t = Clock::now();
     std::vector<Eigen::Vector3f> nref;
     KernelSet ks = build_kernels<true>(d, *index, prm, nref, "kernels");
     index.reset();
+    x = std::move(d.p);
     st.kernels = ks.fitted;
     st.seconds_kernels += since(t);
     t = Clock::now();

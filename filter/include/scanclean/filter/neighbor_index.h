@@ -47,6 +47,11 @@ class NeighborIndex {
   void for_each_slot_within(const Eigen::Vector3f& q, float r, F&& f) const {
     visit<true>(q, r, f);
   }
+  //! Calls f(begin_slot, end_slot) for every occupied grid cell that may hold points within r
+  //! of q (a superset of the ball; callers filter by distance). Returns false, calling nothing,
+  //! when r is too large for the grid (use for_each_slot_within then).
+  template <class F>
+  bool for_each_cell_run(const Eigen::Vector3f& q, float r, F&& f) const;
   //! The point in grid slot s (that is, point(order()[s])).
   const Eigen::Vector3f& slot_point(std::size_t s) const { return pts_[s]; }
   //! Grid slot of original index i.
@@ -60,6 +65,27 @@ class NeighborIndex {
  private:
   template <bool kSlots, class F>
   void visit(const Eigen::Vector3f& q, float r, F& f) const;
+  // Distance test over slots [b, e), branch-free selection, then f for the hits in slot order.
+  template <bool kSlots, class F>
+  void scan(std::uint32_t b, std::uint32_t e, const Eigen::Vector3f& q, float r2, F& f) const {
+    constexpr std::uint32_t kChunk = 64;
+    std::uint32_t hit[kChunk];
+    float hd[kChunk];
+    const float qx = q.x(), qy = q.y(), qz = q.z();
+    for (std::uint32_t s0 = b; s0 < e; s0 += kChunk) {
+      const std::uint32_t s1 = std::min(e, s0 + kChunk);
+      std::uint32_t n = 0;
+      for (std::uint32_t s = s0; s < s1; ++s) {
+        const float* p = pts_[s].data();
+        const float dx = p[0] - qx, dy = p[1] - qy, dz = p[2] - qz;
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        hit[n] = s;
+        hd[n] = d2;
+        n += d2 < r2 ? 1u : 0u;
+      }
+      for (std::uint32_t k = 0; k < n; ++k) f(kSlots ? hit[k] : ids_[hit[k]], hd[k]);
+    }
+  }
   static constexpr int kMaxGridSpan = 4;  // cells per axis scanned by the grid path
   void tree_within(const Eigen::Vector3f& q, float r,
                    std::vector<std::pair<std::uint32_t, float>>& out) const;
@@ -112,10 +138,7 @@ void NeighborIndex::visit(const Eigen::Vector3f& q, float r, F& f) const {
     if (cq >= 0) {
       for (std::uint32_t k = adj_begin_[cq], ke = adj_begin_[cq + 1]; k < ke; ++k) {
         const std::uint32_t c = adj_[k];
-        for (std::uint32_t s = cell_begin_[c], e = cell_begin_[c + 1]; s < e; ++s) {
-          const float d2 = (pts_[s] - q).squaredNorm();
-          if (d2 < r2) f(kSlots ? s : ids_[s], d2);
-        }
+        scan<kSlots>(cell_begin_[c], cell_begin_[c + 1], q, r2, f);
       }
       return;
     }
@@ -144,12 +167,45 @@ void NeighborIndex::visit(const Eigen::Vector3f& q, float r, F& f) const {
     for (std::int32_t y = lo[1]; y <= hi[1]; ++y)
       for (std::int32_t x = lo[0]; x <= hi[0]; ++x) {
         const std::int64_t c = find_cell(detail::cell_key(x, y, z));
-        if (c < 0) continue;
-        for (std::uint32_t s = cell_begin_[c], e = cell_begin_[c + 1]; s < e; ++s) {
-          const float d2 = (pts_[s] - q).squaredNorm();
-          if (d2 < r2) f(kSlots ? s : ids_[s], d2);
-        }
+        if (c >= 0) scan<kSlots>(cell_begin_[c], cell_begin_[c + 1], q, r2, f);
       }
+}
+
+template <class F>
+bool NeighborIndex::for_each_cell_run(const Eigen::Vector3f& q, float r, F&& f) const {
+  if (pts_.empty()) return true;
+  if (!grid_) return false;
+  if (r <= cell_f_) {
+    std::int32_t c3[3];
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) {
+      const float c = std::floor((q[a] - lo_[a]) * inv_cell_);
+      inside = inside && c >= 0 && c <= static_cast<float>(dims_[a] - 1);
+      c3[a] = inside ? static_cast<std::int32_t>(c) : 0;
+    }
+    const std::int64_t cq = inside ? find_cell(detail::cell_key(c3[0], c3[1], c3[2])) : -1;
+    if (cq >= 0) {
+      for (std::uint32_t k = adj_begin_[cq], ke = adj_begin_[cq + 1]; k < ke; ++k)
+        f(cell_begin_[adj_[k]], cell_begin_[adj_[k] + 1]);
+      return true;
+    }
+  }
+  std::int32_t lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    const float l = std::floor((q[a] - r - lo_[a]) * inv_cell_);
+    const float h = std::floor((q[a] + r - lo_[a]) * inv_cell_);
+    if (!(h - l < static_cast<float>(kMaxGridSpan))) return false;
+    if (h < 0 || l > static_cast<float>(dims_[a] - 1)) return true;  // nothing near
+    lo[a] = static_cast<std::int32_t>(std::max(l, 0.0f));
+    hi[a] = static_cast<std::int32_t>(std::min(h, static_cast<float>(dims_[a] - 1)));
+  }
+  for (std::int32_t z = lo[2]; z <= hi[2]; ++z)
+    for (std::int32_t y = lo[1]; y <= hi[1]; ++y)
+      for (std::int32_t x = lo[0]; x <= hi[0]; ++x) {
+        const std::int64_t c = find_cell(detail::cell_key(x, y, z));
+        if (c >= 0) f(cell_begin_[c], cell_begin_[c + 1]);
+      }
+  return true;
 }
 
 }  // namespace scanclean
