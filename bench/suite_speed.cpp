@@ -262,7 +262,8 @@ void run_speed_suite(Context& ctx) {
   t.notes.push_back("Peers taking more than " + fmt(kPeerLimitSeconds, 0) +
                     " s by linear extrapolation from the smaller size are not run at the larger "
                     "size and are marked (extrapolated); CGAL wlop is measured at 10k only and "
-                    "extrapolated (linear, optimistic: its neighbourhoods are fixed-radius).");
+                    "extrapolated linearly (its radius is 8 x the average spacing, so the "
+                    "neighbour count per point stays constant).");
   t.notes.push_back(
       "Targets: >= 1M points/s end to end at 1M; 2.1M at adaptive k=250 < 20 s; peak memory <= "
       "256 B/point.");
