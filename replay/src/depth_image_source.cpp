@@ -121,9 +121,52 @@ Raw16 read_pgm16(const fs::path& file) {
   return r;
 }
 
+//! Width and height from the first IFD of a TIFF (tags 256 and 257), checked before OpenCV
+//! decodes, so that a lying header cannot make it allocate a huge image. Returns nothing when
+//! the structure is not understood (OpenCV then reports the problem).
+std::optional<std::pair<std::uint64_t, std::uint64_t>> tiff_size(
+    const std::vector<unsigned char>& b) {
+  if (b.size() < 8) return std::nullopt;
+  bool le;
+  if (b[0] == 'I' && b[1] == 'I')
+    le = true;
+  else if (b[0] == 'M' && b[1] == 'M')
+    le = false;
+  else
+    return std::nullopt;
+  auto u16 = [&](std::size_t o) -> std::uint32_t {
+    return le ? (b[o] | (b[o + 1] << 8)) : ((b[o] << 8) | b[o + 1]);
+  };
+  auto u32 = [&](std::size_t o) -> std::uint32_t {
+    return le ? (std::uint32_t{b[o]} | (std::uint32_t{b[o + 1]} << 8) |
+                 (std::uint32_t{b[o + 2]} << 16) | (std::uint32_t{b[o + 3]} << 24))
+              : ((std::uint32_t{b[o]} << 24) | (std::uint32_t{b[o + 1]} << 16) |
+                 (std::uint32_t{b[o + 2]} << 8) | std::uint32_t{b[o + 3]});
+  };
+  if (u16(2) != 42) return std::nullopt;  // classic TIFF only (BigTIFF: left to OpenCV)
+  const std::uint64_t ifd = u32(4);
+  if (ifd + 2 > b.size()) return std::nullopt;
+  const std::uint32_t n = u16(ifd);
+  if (ifd + 2 + std::uint64_t{n} * 12 > b.size()) return std::nullopt;
+  std::uint64_t w = 0, h = 0;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const std::size_t e = ifd + 2 + k * 12;
+    const std::uint32_t tag = u16(e), type = u16(e + 2);
+    if (tag != 256 && tag != 257) continue;
+    const std::uint64_t v = type == 3 ? u16(e + 8) : type == 4 ? u32(e + 8) : 0;
+    (tag == 256 ? w : h) = v;
+  }
+  if (w == 0 || h == 0) return std::nullopt;
+  return std::make_pair(w, h);
+}
+
 Raw16 read_tiff16(const fs::path& file) {
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = detail::read_file_bytes(file, kMaxImageBytes);
+  if (auto size = tiff_size(bytes); size && size->first * size->second > kMaxPixels)
+    throw InputError(name, "TIFF header",
+                     "implausible image size " + std::to_string(size->first) + "x" +
+                         std::to_string(size->second));
   cv::Mat mat;
   try {
     mat = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);

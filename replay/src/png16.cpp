@@ -108,6 +108,14 @@ Image<std::uint16_t> read_png16(const std::filesystem::path& file, int width, in
     throw InputError(
         name, "PNG header",
         "implausible image size " + std::to_string(h.width) + "x" + std::to_string(h.height));
+  // zlib cannot compress better than about 1032:1, so a file far smaller than raw/1032 bytes
+  // lies about its size: refuse it before the decoder allocates the raw image.
+  const std::uint64_t raw_bytes = (std::uint64_t{h.width} * 2 + 1) * h.height;
+  if (static_cast<std::uint64_t>(bytes.size()) * 1100 < raw_bytes)
+    throw InputError(name, "PNG header",
+                     "claims " + std::to_string(h.width) + "x" + std::to_string(h.height) +
+                         " pixels, far more than " + std::to_string(bytes.size()) +
+                         " bytes of PNG can hold (truncated or corrupt file)");
   cv::Mat mat;
   try {
     mat = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);

@@ -343,6 +343,26 @@ TEST(DepthImageSourceTest, BadImagesGiveInputErrorsNamingTheFile) {
   expect_bad(dir / "huge.pgm", o, "implausible size");
   std::ofstream(dir / "ascii.pgm", std::ios::binary) << "P2\n2 2\n65535\n1 2 3 4\n";
   expect_bad(dir / "ascii.pgm", o, "P5");
+  {  // A TIFF whose header claims 100000 x 100000 pixels: refused before decoding.
+    std::vector<unsigned char> tif;
+    cv::imencode(".tiff", cv::Mat(6, 8, CV_16UC1, cv::Scalar(900)), tif);
+    ASSERT_GT(tif.size(), 8u);
+    ASSERT_EQ(tif[0], 'I');  // OpenCV writes little-endian TIFF
+    const std::size_t ifd = tif[4] | (tif[5] << 8) | (tif[6] << 16) | (tif[7] << 24);
+    const std::size_t n = tif[ifd] | (tif[ifd + 1] << 8);
+    for (std::size_t k = 0; k < n; ++k) {
+      unsigned char* e = &tif[ifd + 2 + k * 12];
+      const int tag = e[0] | (e[1] << 8);
+      if (tag != 256 && tag != 257) continue;
+      e[2] = 4;  // LONG
+      e[3] = 0;
+      const std::uint32_t big = 100000;
+      for (int i = 0; i < 4; ++i) e[8 + i] = static_cast<unsigned char>(big >> (8 * i));
+    }
+    std::ofstream(dir / "lying.tiff", std::ios::binary)
+        .write(reinterpret_cast<const char*>(tif.data()), static_cast<std::streamsize>(tif.size()));
+    expect_bad(dir / "lying.tiff", o, "implausible image size 100000x100000");
+  }
   // A sequence whose second image has another size.
   fs::create_directories(dir / "seq");
   cv::imwrite((dir / "seq/1.png").string(), cv::Mat(6, 8, CV_16UC1, cv::Scalar(900)));

@@ -304,6 +304,30 @@ TEST(RecordingReaderTest, MalformedRecordingsGiveInputErrorsNamingFileAndRow) {
       },
       "depth/000002.png", "is 16x10, expected 16x12");
   expect_corrupt_rejected(
+      [](const fs::path& d) {  // a PNG header lying about its size (session says the same)
+        std::string png = slurp(d / "depth/000001.png");
+        const char big[4] = {0, 0, 0x75, 0x30};  // 30000, big-endian
+        png.replace(16, 4, big, 4);
+        png.replace(20, 4, big, 4);
+        spit(d / "depth/000001.png", png);
+        replace_in(d / "session.json", "\"width\": 16", "\"width\": 30000");
+        replace_in(d / "session.json", "\"height\": 12", "\"height\": 30000");
+      },
+      "depth/000000.png", "is 16x12, expected 30000x30000");
+  expect_corrupt_rejected(
+      [](const fs::path& d) {  // the same lie, consistent with the session: refused unread
+        for (const char* f : {"depth/000000.png", "depth/000001.png", "depth/000002.png"}) {
+          std::string png = slurp(d / f);
+          const char side[4] = {0, 0, 0x20, 0x00};  // 8192 x 8192 = 2^26 pixels, 128 MiB raw
+          png.replace(16, 4, side, 4);
+          png.replace(20, 4, side, 4);
+          spit(d / f, png);
+        }
+        replace_in(d / "session.json", "\"width\": 16", "\"width\": 8192");
+        replace_in(d / "session.json", "\"height\": 12", "\"height\": 8192");
+      },
+      "depth/000000.png", "far more than");
+  expect_corrupt_rejected(
       [](const fs::path& d) {  // truncated PNG data
         std::string png = slurp(d / "depth/000001.png");
         spit(d / "depth/000001.png", png.substr(0, png.size() / 2));
