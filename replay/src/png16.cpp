@@ -156,4 +156,67 @@ void write_png16_atomically(const std::filesystem::path& file, const Image<std::
   });
 }
 
+void write_rgb_png_atomically(const std::filesystem::path& file,
+                              const Image<std::array<std::uint8_t, 3>>& rgb) {
+  cv::Mat bgr(rgb.height, rgb.width, CV_8UC3);
+  for (int v = 0; v < rgb.height; ++v)
+    for (int u = 0; u < rgb.width; ++u) {
+      const auto& p = rgb(u, v);
+      bgr.at<cv::Vec3b>(v, u) = cv::Vec3b(p[2], p[1], p[0]);  // OpenCV stores BGR
+    }
+  std::vector<unsigned char> encoded;
+  bool ok = false;
+  try {
+    ok = cv::imencode(".png", bgr, encoded, {cv::IMWRITE_PNG_COMPRESSION, 1});
+  } catch (const cv::Exception& e) {
+    throw IoError(file.string() + ": PNG encoding failed: " + e.msg);
+  }
+  if (!ok) throw IoError(file.string() + ": PNG encoding failed");
+  write_file_atomically(file, [&](std::ostream& out) {
+    out.write(reinterpret_cast<const char*>(encoded.data()),
+              static_cast<std::streamsize>(encoded.size()));
+  });
+}
+
+Image<std::array<std::uint8_t, 3>> read_rgb_image(const std::filesystem::path& file) {
+  const std::string name = file.string();
+  const std::vector<unsigned char> bytes = read_file_bytes(file, std::uintmax_t{1} << 28);
+  if (bytes.size() >= 8 && bytes[0] == 0x89 && bytes[1] == 'P') {
+    const PngHeader h = parse_png_header(bytes, name);
+    if (std::uint64_t{h.width} * h.height > kMaxPixels)
+      throw InputError(
+          name, "PNG header",
+          "implausible image size " + std::to_string(h.width) + "x" + std::to_string(h.height));
+  }
+  cv::Mat mat;
+  try {
+    mat = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw InputError(name, "", "cannot decode the colour image: " + e.msg);
+  }
+  if (mat.empty()) throw InputError(name, "", "cannot decode the colour image (corrupt?)");
+  if (mat.depth() != CV_8U)
+    throw InputError(name, "",
+                     "colour image must have 8-bit channels, got " +
+                         std::to_string(mat.elemSize1() * 8) + "-bit");
+  cv::Mat bgr;
+  if (mat.channels() == 1)
+    cv::merge(std::vector<cv::Mat>{mat, mat, mat}, bgr);
+  else if (mat.channels() == 3)
+    bgr = mat;
+  else if (mat.channels() == 4) {  // BGRA: drop alpha
+    std::vector<cv::Mat> ch;
+    cv::split(mat, ch);
+    cv::merge(std::vector<cv::Mat>{ch[0], ch[1], ch[2]}, bgr);
+  } else
+    throw InputError(name, "", "colour image has " + std::to_string(mat.channels()) + " channels");
+  Image<std::array<std::uint8_t, 3>> out(bgr.cols, bgr.rows);
+  for (int v = 0; v < bgr.rows; ++v)
+    for (int u = 0; u < bgr.cols; ++u) {
+      const cv::Vec3b p = bgr.at<cv::Vec3b>(v, u);
+      out(u, v) = {p[2], p[1], p[0]};
+    }
+  return out;
+}
+
 }  // namespace scanclean::detail

@@ -3,6 +3,7 @@
 //! 16-bit single-channel PNG input and output through OpenCV's imgcodecs, with the PNG header
 //! checked before decoding (no allocation from a lying header, clear errors naming the file).
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -35,5 +36,12 @@ Image<std::uint16_t> read_png16(const std::filesystem::path& file, int width, in
 //! Encodes a 16-bit grayscale PNG (lossless) and writes it atomically (temporary file, fsync,
 //! rename). \throw IoError.
 void write_png16_atomically(const std::filesystem::path& file, const Image<std::uint16_t>& image);
+
+//! 8-bit RGB PNG (lossless), written atomically. \throw IoError.
+void write_rgb_png_atomically(const std::filesystem::path& file,
+                              const Image<std::array<std::uint8_t, 3>>& rgb);
+
+//! Any 8-bit PNG/JPEG (gray, RGB, RGBA) as RGB, at most 2^26 pixels. \throw InputError.
+Image<std::array<std::uint8_t, 3>> read_rgb_image(const std::filesystem::path& file);
 
 }  // namespace scanclean::detail

@@ -196,6 +196,19 @@ std::filesystem::path RecordingReader::color_file(std::size_t i) const {
   return r.color.empty() ? std::filesystem::path() : impl_->folder / r.color;
 }
 
+RgbImage RecordingReader::read_color(std::size_t i) const {
+  const FrameRecord& r = record(i);
+  if (r.color.empty())
+    throw InputError((impl_->folder / kFramesFileName).string(), line_place(r.line),
+                     "frame " + std::to_string(i) + " has no colour image");
+  try {
+    return detail::read_rgb_image(impl_->folder / r.color);
+  } catch (const InputError& e) {
+    throw InputError(e.what() + std::string(" (") + kFramesFileName + " " + line_place(r.line) +
+                     ")");
+  }
+}
+
 RangeFrame RecordingReader::read_frame(std::size_t i) const {
   const FrameRecord& r = record(i);
   const SessionMetadata& s = impl_->session;

@@ -43,6 +43,17 @@ struct RecordingWriter::Impl {
   std::size_t written = 0;
   std::optional<std::uint64_t> last_index;
   bool has_confidence_dir = false;
+  bool has_color_dir = false;
+
+  void write(const RangeFrame& frame, const RgbImage* color);
+
+  void ensure_dir(const char* name, bool& done) {
+    if (done) return;
+    std::error_code ec;
+    std::filesystem::create_directories(folder / name, ec);
+    if (ec) throw IoError((folder / name).string() + ": cannot create: " + ec.message());
+    done = true;
+  }
 
   ~Impl() {
     if (csv_fd >= 0) ::close(csv_fd);
@@ -109,7 +120,15 @@ RecordingWriter::RecordingWriter(RecordingWriter&&) noexcept = default;
 RecordingWriter& RecordingWriter::operator=(RecordingWriter&&) noexcept = default;
 
 void RecordingWriter::write(const RangeFrame& frame) {
-  Impl& m = *impl_;
+  impl_->write(frame, nullptr);
+}
+
+void RecordingWriter::write(const RangeFrame& frame, const RgbImage& color) {
+  impl_->write(frame, &color);
+}
+
+void RecordingWriter::Impl::write(const RangeFrame& frame, const RgbImage* color) {
+  Impl& m = *this;
   const std::string where = m.csv_path();
   const std::string place =
       "frame " + std::to_string(m.written) + " (index " + std::to_string(frame.index) + ")";
@@ -135,6 +154,10 @@ void RecordingWriter::write(const RangeFrame& frame) {
   if (frame.confidence &&
       (frame.confidence->width != m.session.width || frame.confidence->height != m.session.height))
     throw InputError(where, place, "confidence image size differs from the depth image size");
+  if (color &&
+      (color->empty() || color->data.size() != static_cast<std::size_t>(color->width) *
+                                                   static_cast<std::size_t>(color->height)))
+    throw InputError(where, place, "colour image is empty or inconsistent");
 
   if (m.session.finalized) {  // writing after finish(): the recording is open again
     m.session.finalized = false;
@@ -146,13 +169,7 @@ void RecordingWriter::write(const RangeFrame& frame) {
   detail::write_png16_atomically(m.folder / depth_rel, frame.depth);
   std::string conf_rel;
   if (frame.confidence) {
-    if (!m.has_confidence_dir) {
-      std::error_code ec;
-      std::filesystem::create_directories(m.folder / "confidence", ec);
-      if (ec)
-        throw IoError((m.folder / "confidence").string() + ": cannot create: " + ec.message());
-      m.has_confidence_dir = true;
-    }
+    m.ensure_dir("confidence", m.has_confidence_dir);
     Image<std::uint16_t> q(frame.confidence->width, frame.confidence->height);
     std::transform(frame.confidence->data.begin(), frame.confidence->data.end(), q.data.begin(),
                    [](float c) {
@@ -163,13 +180,21 @@ void RecordingWriter::write(const RangeFrame& frame) {
     conf_rel = frame_file("confidence", m.written);
     detail::write_png16_atomically(m.folder / conf_rel, q);
   }
+  std::string color_rel;
+  if (color) {
+    m.ensure_dir("color", m.has_color_dir);
+    color_rel = frame_file("color", m.written);
+    detail::write_rgb_png_atomically(m.folder / color_rel, *color);
+  }
   // The frame's files are durable (fsynced, renamed); make the renames durable, then index.
   if (m.options.sync_index) {
     sync_directory(m.folder / "depth");
     if (frame.confidence) sync_directory(m.folder / "confidence");
+    if (color) sync_directory(m.folder / "color");
   }
   std::string line = std::to_string(frame.index) + "," + std::to_string(frame.device_ts_us) + "," +
-                     std::to_string(frame.host_ts_ns) + "," + depth_rel + ",," + conf_rel + ",0\n";
+                     std::to_string(frame.host_ts_ns) + "," + depth_rel + "," + color_rel + "," +
+                     conf_rel + ",0\n";
   m.append_line(line);
   m.last_index = frame.index;
   ++m.written;

@@ -93,6 +93,37 @@ TEST(RecordingReaderTest, WriterReaderRoundTripIsBitExact) {
   fs::remove_all(dir);
 }
 
+TEST(RecordingReaderTest, ColourRoundTripIsExact) {
+  const auto dir = test::make_temp_dir("rec_colour");
+  const SessionMetadata s = test::fixture_session();
+  RgbImage rgb(20, 10);  // another size than depth (colour cameras often differ)
+  for (int v = 0; v < rgb.height; ++v)
+    for (int u = 0; u < rgb.width; ++u)
+      rgb(u, v) = {static_cast<std::uint8_t>(u * 12), static_cast<std::uint8_t>(v * 25),
+                   static_cast<std::uint8_t>(255 - u - v)};
+  {
+    RecordingWriter w(dir, s, RecordingWriterOptions{false});
+    w.write(test::fixture_frame(s, 0, false), rgb);
+    w.write(test::fixture_frame(s, 1, false));  // a frame without colour
+    EXPECT_THROW(w.write(test::fixture_frame(s, 2, false), RgbImage{}), InputError);
+    w.finish();
+  }
+  RecordingReader r(dir);
+  ASSERT_EQ(r.frame_count(), 2u);
+  EXPECT_EQ(r.record(0).color, "color/000000.png");
+  EXPECT_EQ(r.color_file(0), dir / "color/000000.png");
+  const RgbImage back = r.read_color(0);
+  ASSERT_EQ(back.width, 20);
+  ASSERT_EQ(back.height, 10);
+  EXPECT_EQ(back.data, rgb.data);  // R stays R (OpenCV's BGR handled inside)
+  // OpenCV agrees on the channel order: pixel (3, 2) has R = 36, G = 50, B = 250.
+  const cv::Mat bgr = cv::imread((dir / "color/000000.png").string(), cv::IMREAD_COLOR);
+  EXPECT_EQ(bgr.at<cv::Vec3b>(2, 3), cv::Vec3b(250, 50, 36));
+  EXPECT_TRUE(r.color_file(1).empty());
+  EXPECT_THROW(r.read_color(1), InputError);
+  fs::remove_all(dir);
+}
+
 TEST(RecordingReaderTest, WriterValidatesFrames) {
   const auto dir = test::make_temp_dir("rec_writer_checks");
   const SessionMetadata s = test::fixture_session();

@@ -24,6 +24,9 @@ inline constexpr const char* kFramesFileName = "frames.csv";
 inline constexpr const char* kFramesCsvHeader =
     "index,device_ts_us,host_ts_ns,depth,color,confidence,flags";
 
+//! An 8-bit RGB image (R, G, B per pixel, row-major), for the optional colour stream.
+using RgbImage = Image<std::array<std::uint8_t, 3>>;
+
 //! The sensor a recording came from (session.json "device").
 struct RecordedDevice {
   std::string kind;  //!< SourceInfo::kind of the recorded source ("openni2", "oni", ...); may be ""

@@ -51,6 +51,10 @@ class RecordingReader {
   RangeFrame read_frame(std::size_t i) const;
   //! Absolute path of frame i's colour image, empty when none was recorded.
   std::filesystem::path color_file(std::size_t i) const;
+  //! Decodes frame i's colour image (PNG or JPEG, 8-bit, 1, 3 or 4 channels; gray is expanded,
+  //! alpha dropped). \throw InputError naming the file (no colour recorded for this frame, not
+  //! decodable, more than 2^26 pixels, not 8-bit).
+  RgbImage read_color(std::size_t i) const;
   //! Recoverable problems found while opening (e.g. "ignored a partial last line").
   const std::vector<std::string>& warnings() const;
   const std::filesystem::path& folder() const;

@@ -46,6 +46,9 @@ class RecordingWriter {
   //! reopens the recording (session.json goes back to "finalized": false until finish()).
   //! \throw InputError (wrong size, unit or index order, no depth image), IoError.
   void write(const RangeFrame& frame);
+  //! Same, plus the frame's colour image (any size; stored losslessly as color/NNNNNN.png,
+  //! 8-bit RGB). \throw as write(frame), and InputError for an empty colour image.
+  void write(const RangeFrame& frame, const RgbImage& color);
 
   //! Rewrites session.json atomically with "finalized": true and frame_count. Idempotent.
   //! \throw IoError.
