@@ -98,9 +98,12 @@ void openni2_section(Summary& summary) {
     return;
   }
   std::printf("OpenNI2 devices: %zu\n", list.devices.size());
-  for (const auto& d : list.devices)
-    std::printf("  %s  %s %s  usb %04x:%04x\n    open with: --source openni2://%s\n", d.uri.c_str(),
-                d.vendor.c_str(), d.name.c_str(), d.usb_vendor_id, d.usb_product_id, d.uri.c_str());
+  for (const auto& d : list.devices) {
+    const bool virtual_sensor = d.uri.rfind("vsensor://", 0) == 0;
+    std::printf("  %s  %s %s  usb %04x:%04x\n    source URI: %s%s\n", d.uri.c_str(),
+                d.vendor.c_str(), d.name.c_str(), d.usb_vendor_id, d.usb_product_id,
+                virtual_sensor ? "" : "openni2://", d.uri.c_str());
+  }
   if (list.devices.empty()) std::printf("  no depth sensor found\n");
   bool has_ps1080 = false;
   for (const auto& d : list.drivers) has_ps1080 |= d == "libPS1080.so.0";
