@@ -328,8 +328,11 @@ Sidecar read_sidecar(const fs::path& file) {
 
 //! intrinsics.json beside the images, else in the parent folder; Open3D's camera_intrinsic.json
 //! and camera_primesense.json are accepted under the same rule.
-std::optional<fs::path> find_sidecar(const fs::path& image_dir) {
+std::optional<fs::path> find_sidecar(const fs::path& images) {
   std::error_code ec;
+  fs::path image_dir = fs::absolute(images, ec).lexically_normal();
+  if (ec || image_dir.empty()) image_dir = images;
+  if (image_dir.has_filename() == false) image_dir = image_dir.parent_path();  // trailing '/'
   for (const fs::path& dir : {image_dir, image_dir.parent_path()}) {
     if (dir.empty()) continue;
     for (const char* n : {"intrinsics.json", "camera_intrinsic.json", "camera_primesense.json"})
@@ -384,8 +387,8 @@ class DepthImageSource final : public RangeSource {
 
   void open() override {
     next_ = 0;
-    const fs::path dir =
-        fs::is_directory(path_) ? files_.front().parent_path() : path_.parent_path();
+    fs::path dir = files_.front().parent_path();  // the images' folder (maybe <folder>/depth)
+    if (dir.empty()) dir = ".";
     std::optional<Sidecar> sidecar;
     if (auto f = find_sidecar(dir)) sidecar = read_sidecar(*f);
 
