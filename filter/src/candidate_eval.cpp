@@ -1,5 +1,7 @@
 #include "candidate_eval.h"
 
+#include <immintrin.h>
+
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -173,12 +175,56 @@ typedef int VI8 __attribute__((vector_size(32)));
 [[gnu::target("avx2,fma")]] double likelihood_avx2(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V8, VI8>(b, x, t2);
 }
-bool step_sse(CandidateBuffer& b, const float x[3], const float nref[3], float t2,
-              StepSums& out) {
+bool step_sse(CandidateBuffer& b, const float x[3], const float nref[3], float t2, StepSums& out) {
   return step_impl<V4, VI4>(b, x, nref, t2, out);
 }
 double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V4, VI4>(b, x, t2);
+}
+
+[[gnu::target("avx2,fma")]] void append_avx2(CandidateBuffer& b, const float* base,
+                                             const std::uint32_t* slots, std::size_t n,
+                                             const float origin[3], float slab2) {
+  constexpr std::size_t R = CandidateBuffer::kRecord;
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    const std::size_t j = b.count;
+    for (int half = 0; half < 2; ++half) {
+      __m256 r[8];
+      for (int i = 0; i < 8; ++i) r[i] = _mm256_loadu_ps(base + R * slots[k + i] + 8 * half);
+      const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+      const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+      const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+      const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+      const __m256 u0 = _mm256_shuffle_ps(t0, t2, 0x44), u1 = _mm256_shuffle_ps(t0, t2, 0xEE);
+      const __m256 u2 = _mm256_shuffle_ps(t1, t3, 0x44), u3 = _mm256_shuffle_ps(t1, t3, 0xEE);
+      const __m256 u4 = _mm256_shuffle_ps(t4, t6, 0x44), u5 = _mm256_shuffle_ps(t4, t6, 0xEE);
+      const __m256 u6 = _mm256_shuffle_ps(t5, t7, 0x44), u7 = _mm256_shuffle_ps(t5, t7, 0xEE);
+      __m256 c[8];
+      c[0] = _mm256_permute2f128_ps(u0, u4, 0x20);
+      c[1] = _mm256_permute2f128_ps(u1, u5, 0x20);
+      c[2] = _mm256_permute2f128_ps(u2, u6, 0x20);
+      c[3] = _mm256_permute2f128_ps(u3, u7, 0x20);
+      c[4] = _mm256_permute2f128_ps(u0, u4, 0x31);
+      c[5] = _mm256_permute2f128_ps(u1, u5, 0x31);
+      c[6] = _mm256_permute2f128_ps(u2, u6, 0x31);
+      c[7] = _mm256_permute2f128_ps(u3, u7, 0x31);
+      if (half == 0) {
+        for (int f = 0; f < 3; ++f)
+          _mm256_storeu_ps(&b.f[f][j], _mm256_sub_ps(c[f], _mm256_set1_ps(origin[f])));
+        for (int f = 3; f < 8; ++f) _mm256_storeu_ps(&b.f[f][j], c[f]);
+      } else {
+        for (int f = 0; f < 4; ++f) _mm256_storeu_ps(&b.f[8 + f][j], c[f]);  // q12 n
+        _mm256_storeu_ps(&b.f[CandidateBuffer::kSlab2][j],
+                         _mm256_mul_ps(c[4], _mm256_set1_ps(slab2)));
+        _mm256_storeu_ps(&b.f[CandidateBuffer::kH2][j], c[4]);
+        _mm256_storeu_ps(&b.f[CandidateBuffer::kW][j], c[5]);
+      }
+    }
+    for (int i = 0; i < 8; ++i) b.slot[j + i] = slots[k + i];
+    b.count += 8;
+  }
+  for (; k < n; ++k) b.push_record(slots[k], base + R * slots[k], origin, slab2);
 }
 
 bool have_avx2() {
@@ -195,6 +241,17 @@ bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], f
 
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2) {
   return have_avx2() ? likelihood_avx2(buffer, x, t2) : likelihood_sse(buffer, x, t2);
+}
+
+void append_records(CandidateBuffer& buffer, const float* rec_base, const std::uint32_t* slots,
+                    std::size_t n, const float origin[3], float slab2) {
+  buffer.reserve(buffer.count + n);
+  if (have_avx2()) {
+    append_avx2(buffer, rec_base, slots, n, origin, slab2);
+  } else {
+    for (std::size_t k = 0; k < n; ++k)
+      buffer.push_record(slots[k], rec_base + CandidateBuffer::kRecord * slots[k], origin, slab2);
+  }
 }
 
 float fast_exp(float a) {

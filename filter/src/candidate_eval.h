@@ -6,6 +6,7 @@
 //! depend on threads (they may differ between the AVX2 and SSE2 paths).
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 namespace scanclean::detail {
@@ -65,6 +66,11 @@ struct StepSums {
   double n[3] = {0, 0, 0};   // sum omega n
   float e_min = 0;
 };
+
+//! Appends the kernels with the given slots (records of kRecord floats at rec_base + kRecord *
+//! slot) with centres relative to origin; AVX2 transposes 8 records at a time.
+void append_records(CandidateBuffer& buffer, const float* rec_base, const std::uint32_t* slots,
+                    std::size_t n, const float origin[3], float slab2);
 
 //! One iteration's sums at x (relative to the local origin). Returns false if no kernel is kept
 //! (e_j < t2 and d_j^2 < slab2_j). Fills buffer.f[kE] and buffer.d. The normal sum uses

@@ -256,7 +256,8 @@ KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params&
   rec.resize(R * m);
   rec.shrink_to_fit();
   std::vector<Eigen::Vector3f> cs(m);
-  for (std::size_t k = 0; k < m; ++k) cs[k] = Eigen::Vector3f(rec[R * k], rec[R * k + 1], rec[R * k + 2]);
+  for (std::size_t k = 0; k < m; ++k)
+    cs[k] = Eigen::Vector3f(rec[R * k], rec[R * k + 1], rec[R * k + 2]);
   ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell * prm.gather_factor * 1.001);
   const auto& order = ks.index->order();
   std::vector<bool> done(m, false);
@@ -310,21 +311,18 @@ void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
     for (std::uint32_t s0 = b; s0 < e; s0 += kChunk) {
       const std::uint32_t s1 = std::min(e, s0 + kChunk);
       std::uint32_t n = 0;
-      for (std::uint32_t s = s0; s < s1; ++s) {  // branch-free selection
-        const float* k = rec + R * s;
+      for (std::uint32_t s = s0; s < s1; ++s) {  // branch-free selection on compact centres
+        const float* k = ks.index->slot_point(s).data();
         const float dx = k[0] - origin[0], dy = k[1] - origin[1], dz = k[2] - origin[2];
         hit[n] = s;
         n += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
       }
-      buf.reserve(buf.count + n);
-      for (std::uint32_t k = 0; k < n; ++k)
-        buf.push_record(hit[k], rec + R * hit[k], origin, ctx.slab2);
+      detail::append_records(buf, rec, hit, n, origin, ctx.slab2);
     }
   });
   if (!grid)
-    ks.index->for_each_slot_within(of, r, [&](std::uint32_t s, float) {
-      buf.push_record(s, rec + R * s, origin, ctx.slab2);
-    });
+    ks.index->for_each_slot_within(
+        of, r, [&](std::uint32_t s, float) { buf.push_record(s, rec + R * s, origin, ctx.slab2); });
   buf.finish();
 }
 
@@ -493,9 +491,12 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     }
     return cl;
   }
-  tbb::parallel_sort(cand.begin(), cand.end(), [&](std::uint32_t a, std::uint32_t b) {
-    return pr.L[a] != pr.L[b] ? pr.L[a] > pr.L[b] : a < b;
-  });
+  {
+    std::vector<std::pair<float, std::uint32_t>> key(cand.size());
+    for (std::size_t k = 0; k < cand.size(); ++k) key[k] = {-pr.L[cand[k]], cand[k]};
+    tbb::parallel_sort(key.begin(), key.end());  // decreasing L, then index: deterministic
+    for (std::size_t k = 0; k < cand.size(); ++k) cand[k] = key[k].second;
+  }
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::max());
   Eigen::Vector3d hi = -lo;
   for (std::uint32_t i : cand) {
@@ -636,21 +637,60 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   if (o.scale == ScaleMode::kFixed) {
     h = o.h;
   } else {
-    NeighborIndex tree(pf, 0.0);  // k-d tree only
-    if (o.scale == ScaleMode::kAuto) {
-      const std::size_t M = std::min<std::size_t>(N, 10000);
-      std::vector<double> kth(M, 0.0);
-      std::vector<std::size_t> sample(M);
-      for (std::size_t k = 0; k < M; ++k) sample[k] = k * N / M;
+    // A rough K-th neighbour distance from a k-d tree over a subsample (the (K+1)/step-th
+    // neighbour among every step-th point), only to size the grid and the first query radius;
+    // the distances used below are then exact, from grid radius queries.
+    const std::size_t M = std::min<std::size_t>(N, 10000);
+    std::vector<std::size_t> sample(M);
+    for (std::size_t k = 0; k < M; ++k) sample[k] = k * N / M;
+    const std::size_t kk = static_cast<std::size_t>(K) + 1;
+    const std::size_t step = std::clamp<std::size_t>(N / (8 * kk), 1, 16);
+    double r_est = 0;
+    {
+      std::vector<Eigen::Vector3f> sub;
+      sub.reserve(N / step + 1);
+      for (std::size_t i = 0; i < N; i += step) sub.push_back(pf[i]);
+      NeighborIndex tree(std::move(sub), 0.0);  // k-d tree only
+      const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
+      std::vector<double> est(M, 0.0);
       parallel_each(M, [&](std::size_t k) {
         thread_local std::vector<std::pair<float, std::uint32_t>> nn;
-        tree.knn(pf[sample[k]], static_cast<std::size_t>(o.k_h) + 1, nn);
-        kth[k] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
+        tree.knn(pf[sample[k]], ks, nn);
+        est[k] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
       });
-      double h0 = median_of(kth);
+      r_est = median_of(est);
+    }
+    if (!(r_est > 0)) r_est = fallback_h;
+    const float r_max = static_cast<float>(2 * diag + fallback_h);
+    index = std::make_unique<NeighborIndex>(pf, r_est * 1.6);
+    // Exact distance to the K-th other point: all points within r, grown until K + 1 found.
+    auto kth = [&](const Eigen::Vector3f& q) {
+      thread_local std::vector<float> d2s;
+      d2s.reserve(4 * kk);
+      float r = static_cast<float>(r_est * 1.15);
+      while (true) {
+        d2s.clear();
+        index->for_each_within(q, r, [&](std::uint32_t, float d2) { d2s.push_back(d2); });
+        if (d2s.size() >= kk) {
+          std::nth_element(d2s.begin(), d2s.begin() + static_cast<std::ptrdiff_t>(kk - 1),
+                           d2s.end());
+          return std::sqrt(static_cast<double>(d2s[kk - 1]));
+        }
+        if (r >= r_max)  // fewer than K + 1 points in all
+          return d2s.empty()
+                     ? 0.0
+                     : std::sqrt(static_cast<double>(*std::max_element(d2s.begin(), d2s.end())));
+        r *= 1.25f;
+      }
+    };
+    if (o.scale == ScaleMode::kAuto) {
+      std::vector<double> kd(M, 0.0);
+      parallel_each(M, [&](std::size_t k) { kd[k] = kth(pf[sample[k]]); });
+      double h0 = median_of(kd);
       if (!(h0 > 0)) h0 = fallback_h;  // at least K_h + 1 coincident points
       st.h0 = h0;
-      index = std::make_unique<NeighborIndex>(pf, h0 * 1.001);
+      if (!(index->cell() >= h0 * 1.001 && index->cell() <= h0 * 1.7))
+        index = std::make_unique<NeighborIndex>(pf, h0 * 1.001);
       // Noise: median sqrt(lambda_3) of the PCA at h0 over the same sample.
       std::vector<double> sig(M, -1.0);
       in.h = h0;
@@ -669,20 +709,18 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       sig.erase(std::remove(sig.begin(), sig.end(), -1.0), sig.end());
       st.noise_sigma = median_of(sig);
       h = std::max(h0, 3 * st.noise_sigma);
-      if (h > h0) index.reset();
+      if (!(index->cell() >= h * 1.001 && index->cell() <= h * 1.7)) index.reset();
     } else {
       std::vector<float> hi(N);
-      parallel_each_reporting(N, o, "scale", [&](std::size_t i) {
-        thread_local std::vector<std::pair<float, std::uint32_t>> nn;
-        tree.knn(pf[i], static_cast<std::size_t>(o.k_adaptive) + 1, nn);
-        hi[i] = nn.empty() ? 0.0f : std::sqrt(nn.back().first);
-      });
+      parallel_each_reporting(N, o, "scale",
+                              [&](std::size_t i) { hi[i] = static_cast<float>(kth(pf[i])); });
       in.hi = std::move(hi);
       h = median_of(in.hi);
       if (!(h > 0)) h = fallback_h;
       const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
       st.h_min = *mm.first;
       st.h_max = *mm.second;
+      if (!(index->cell() >= h * 1.001 && index->cell() <= h * 1.7)) index.reset();
     }
   }
   in.h = h;
