@@ -93,6 +93,27 @@ TEST(RecordingReaderTest, WriterReaderRoundTripIsBitExact) {
   fs::remove_all(dir);
 }
 
+TEST(RecordingReaderTest, ReadFrameIsThreadSafe) {
+  const auto dir = test::make_temp_dir("rec_threads");
+  const std::vector<std::uint64_t> indices{0, 1, 2, 3, 4, 5, 6, 7};
+  write_fixture(dir, indices, true);
+  const RecordingReader r(dir);
+  const SessionMetadata s = test::fixture_session();
+  std::vector<int> mismatches(4, 0);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&, t] {
+      for (int round = 0; round < 5; ++round)
+        for (std::size_t i = 0; i < r.frame_count(); ++i) {
+          const RangeFrame f = r.read_frame((i + static_cast<std::size_t>(t)) % r.frame_count());
+          if (f.depth.data != test::fixture_frame(s, f.index, true).depth.data) ++mismatches[t];
+        }
+    });
+  for (auto& th : threads) th.join();
+  EXPECT_EQ(mismatches, std::vector<int>(4, 0));
+  fs::remove_all(dir);
+}
+
 TEST(RecordingReaderTest, ColourRoundTripIsExact) {
   const auto dir = test::make_temp_dir("rec_colour");
   const SessionMetadata s = test::fixture_session();

@@ -18,9 +18,10 @@ namespace scanclean {
 //! frame of next() is written before it is returned (the frame itself is returned unchanged).
 //! kTimeout/kDisconnected/kError are forwarded untouched. End of stream and close() finish()
 //! the recording (session.json "finalized": true); a later open() (reconnect) appends to the same
-//! recording. When a reconnected inner source restarts its frame indices, the recorded index is
-//! shifted so that it keeps increasing (the delivered frame keeps the inner index).
-//! info() is the inner source's info. \throw whatever inner throws, plus RecordingWriter's
+//! recording. Destroying the source finishes the recording too (it then holds exactly the frames
+//! that were delivered). When a reconnected inner source restarts its frame indices, the recorded
+//! index is shifted so that it keeps increasing (the delivered frame keeps the inner index). info()
+//! is the inner source's info. \throw whatever inner throws, plus RecordingWriter's
 //! IoError/InputError (e.g. the folder already holds a recording, a frame of another size).
 //! Thread safety: one thread per source object.
 std::unique_ptr<RangeSource> make_recording_source(std::unique_ptr<RangeSource> inner,
