@@ -274,13 +274,16 @@ Sidecar read_sidecar(const fs::path& file) {
     K.fy = m[4].get<double>();
     K.cx = m[6].get<double>();
     K.cy = m[7].get<double>();
-  } else {
+  } else if (j.contains("fx") || j.contains("fy") || j.contains("cx") || j.contains("cy")) {
     K.fx = num("fx");
     K.fy = num("fy");
     K.cx = num("cx");
     K.cy = num("cy");
   }
-  if (!(K.fx > 0) || !(K.fy > 0))
+  // A sidecar may hold only the format (intrinsics then come from the command line).
+  const bool has_k = j.contains("intrinsic_matrix") || j.contains("fx") || j.contains("fy") ||
+                     j.contains("cx") || j.contains("cy");
+  if (has_k && (!(K.fx > 0) || !(K.fy > 0)))
     throw InputError(name, "field fx/fy", "focal lengths must be positive");
   K.width = opt_int("width");
   K.height = opt_int("height");
@@ -292,7 +295,7 @@ Sidecar read_sidecar(const fs::path& file) {
     for (int k = 0; k < 5; ++k) K.dist[k] = d[k].get<double>();
   }
   K.source = "calibration";
-  s.K = K;
+  if (has_k) s.K = K;
   if (j.contains("format")) {
     if (!j["format"].is_string() || !parse_encoding(j["format"].get<std::string>()))
       throw InputError(name, "field format",

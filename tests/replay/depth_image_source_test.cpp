@@ -264,6 +264,15 @@ TEST(DepthImageSourceTest, SidecarGivesIntrinsicsAndFormat) {
   cli->open();
   EXPECT_EQ(cli->info().K.fx, 111);
   EXPECT_DOUBLE_EQ(cli->info().depth_unit_m, 0.001);
+  // A sidecar with only the format: intrinsics must come from the command line.
+  std::ofstream(dir / "intrinsics.json", std::ios::trunc) << R"({"format": "mm"})";
+  auto no_k = make_depth_image_source(dir);
+  EXPECT_THROW(no_k->open(), OptionError);
+  auto only_format = make_depth_image_source(dir, with_k(111, 112, 10, 5));
+  only_format->open();
+  EXPECT_DOUBLE_EQ(only_format->info().depth_unit_m, 0.001);
+  EXPECT_NE(only_format->info().name.find("from intrinsics.json"), std::string::npos)
+      << only_format->info().name;
   // A K whose size differs from the images is an InputError.
   DepthImageOptions wrong = with_k(111, 112, 10, 5);
   wrong.K->width = 640;
