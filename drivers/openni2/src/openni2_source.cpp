@@ -157,6 +157,12 @@ void OpenNI2Source::open_device(bool start) {
   if (starts_with(uri_, "openni2://")) {
     kind_ = "openni2";
     device_uri = uri_.substr(10);
+    // Debian's DummyDevice (URIs Dummy, Oz, PingPong) never joins its stream threads and
+    // crashes the process at exit (SENSORS.md §1): refuse it.
+    if (device_uri == "Dummy" || device_uri == "Oz" || device_uri == "PingPong")
+      throw UnavailableError("OpenNI2's DummyDevice ('" + device_uri +
+                             "') is not supported: it crashes at exit; use vsensor://pattern "
+                             "or a recording instead");
   } else if (starts_with(uri_, "vsensor://")) {
     kind_ = "vsensor";
     device_uri = uri_;
@@ -237,8 +243,9 @@ void OpenNI2Source::open_device(bool start) {
     }
   }
   if (is_file_) {
+    // A recording whose writer was killed has no frame count in its header (0): unknown.
     const int n = device_.getPlaybackControl()->getNumberOfFrames(stream_);
-    if (n >= 0) frame_count_ = static_cast<std::uint64_t>(n);
+    if (n > 0) frame_count_ = static_cast<std::uint64_t>(n);
   } else {
     int n = 0;
     if (stream_.isPropertySupported(ONI_STREAM_PROPERTY_NUMBER_OF_FRAMES) &&
@@ -333,10 +340,12 @@ ReadStatus OpenNI2Source::next(RangeFrame& frame, std::chrono::milliseconds time
       return ReadStatus::kEndOfStream;
     }
     if (is_file_ && consecutive_timeouts_ >= 3) {
-      // The player stopped early (e.g. a truncated file): report it and end.
+      // Three waits in a row without a frame in manual mode: the player has nothing left (a
+      // recording without a frame count, e.g. from a killed recorder, or a truncated file).
       end_of_stream_ = true;
-      last_error_ = "the .oni player delivered " + std::to_string(delivered_) + " of " +
-                    (frame_count_ ? std::to_string(*frame_count_) : std::string("?")) + " frames";
+      last_error_ = "the .oni player delivered " + std::to_string(delivered_) + " frames " +
+                    (frame_count_ ? "of " + std::to_string(*frame_count_)
+                                  : std::string("(the file header has no frame count)"));
       return ReadStatus::kEndOfStream;
     }
     if (!is_file_ && options_.disconnect_timeouts > 0 &&

@@ -421,7 +421,9 @@ bool VsensorStream::emit_next() {
 
 void VsensorStream::run_realtime() {
   using clock = std::chrono::steady_clock;
-  const auto t0 = clock::now();
+  // The first frame leaves 20 ms after start(): OpenNI marks the stream started only after the
+  // driver's start() returns, and a frame raised before that is discarded.
+  const auto t0 = clock::now() + std::chrono::milliseconds(20);
   std::int64_t first_ts = -1;
   std::size_t emitted = 0;
   const std::int64_t period_us = 1000000 / std::max(1, provider_.fps());
