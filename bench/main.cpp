@@ -109,7 +109,7 @@ int run(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : static_cast<int>(ExitCode::kBadOptions);
   }
   if (self_test) return self_test_main(seed);
-  if (tune_n > 0) return tune_main(tune_n, seed + 1000, tune_sigma);
+  if (tune_n > 0) return tune_main(tune_n, seed + 1000, tune_sigma, bunny_mesh);
   if (!speed_child.empty()) return speed_child_main(speed_child, speed_n, seed, threads);
 
   std::unique_ptr<tbb::global_control> limit;

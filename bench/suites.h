@@ -51,7 +51,8 @@ void run_real_suite(Context& ctx);
 //! --self-test: checks of the harness against oracles; returns the exit code (0 = all passed).
 int self_test_main(std::uint64_t seed);
 //! --tune: the peers' neighbourhood sizes on a tuning set (seed distinct from the protocol's).
-int tune_main(std::size_t n, std::uint64_t seed, double only_sigma);
+int tune_main(std::size_t n, std::uint64_t seed, double only_sigma,
+              const std::filesystem::path& bunny);
 
 //! Entry point of a speed measurement child process (see suite_speed.cpp). Returns the exit code.
 int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads);

@@ -9,14 +9,22 @@
 
 namespace scanclean::bench {
 
-int tune_main(std::size_t n, std::uint64_t seed, double only_sigma) {
+int tune_main(std::size_t n, std::uint64_t seed, double only_sigma,
+              const std::filesystem::path& bunny) {
   std::vector<std::unique_ptr<Shape>> shapes;
   shapes.push_back(make_sphere());
   shapes.push_back(make_torus());
   shapes.push_back(make_rounded_box());
+  try {
+    shapes.push_back(make_mesh_shape(bunny, "bunny"));
+  } catch (const std::exception& e) {
+    std::cout << "bunny left out: " << e.what() << "\n";
+  }
   const std::vector<unsigned> grid = n >= 30000 ? std::vector<unsigned>{48, 96, 192, 384, 576}
                                                 : std::vector<unsigned>{12, 24, 48, 96, 192, 384};
-  std::cout << "N=" << n << " tuning seed " << seed << "; mean over sphere, torus, rounded_box\n";
+  std::cout << "N=" << n << " tuning seed " << seed << "; mean over";
+  for (const auto& sh : shapes) std::cout << " " << sh->name();
+  std::cout << "\n";
   std::cout << "sigma  method     k    CD x1e4  P2M x1e4\n";
   for (double sigma : {0.01, 0.02, 0.03}) {
     if (only_sigma > 0 && std::abs(sigma - only_sigma) > 1e-9) continue;
