@@ -771,6 +771,13 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     st.kernels = ks.fitted;
     st.seconds_kernels += since(t);
     t = Clock::now();
+    if (o.passes == 1 && !d.v.empty()) {
+      // Sensor normals are only needed as reference normals from here on: fold them into
+      // nref and free them (memory).
+      for (std::size_t i = 0; i < N; ++i)
+        if (d.has_v(i)) nref[i] = d.v[i];
+      std::vector<Eigen::Vector3f>().swap(d.v);
+    }
     project_all(d, ks, nref, o, x, pr, "projection");
     st.seconds_projection += since(t);
   }

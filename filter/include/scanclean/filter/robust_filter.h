@@ -5,6 +5,23 @@
 //! PCA, a mean-shift-like projection of every point onto a maximum of the likelihood, greedy
 //! clustering of the converged points and density-threshold outlier removal.
 //!
+//! Implementation notes (choices where the spec leaves room):
+//!  - Automatic h: the K_h-th neighbour distances are exact (grid radius queries); a k-d tree
+//!    over a subsample only sizes the grid. If they are all 0 (K_h + 1 coincident points), h
+//!    falls back to 1e-3 x the bounding-box diagonal (1 mm for a single location).
+//!  - Kernels store S^-1 = E diag(1/lambda~) E^T (6 floats), so e_j = x^T S^-1 x = |W_j x|^2.
+//!    Eigen-decomposition: closed form in double, in units of h^2 (accuracy checked in tests).
+//!  - Projection runs in float relative to a per-point local origin; per-lane partial sums of
+//!    the 8-wide (AVX2, else 4-wide SSE2) loops are combined in double in a fixed order.
+//!  - Points without a kernel and without a sensor normal take the reference normal n_ref from
+//!    the kernel with the smallest e_j at the first iteration.
+//!  - Clustering: points flagged not_converged are kept as their own representatives (they
+//!    neither join nor accept others). A representative reports the likelihood, iterations,
+//!    normal and source_index of its seed (its highest-L member) and the L-weighted mean of its
+//!    members' positions.
+//!  - Density test: rho counts input points (member counts); the component-size test also
+//!    counts input points.
+//!
 //! Known limits: two sheets closer than about 0.5 h collapse into one (at gaps of h or more
 //! they stay apart); sharp creases are rounded; curvature bias grows with h^2 / R; near open
 //! boundaries the error is about 1.6x higher; misregistered scan layers closer than h merge.
