@@ -73,9 +73,10 @@ int run(int argc, char** argv) {
   std::string bunny_mesh = std::string(SCANCLEAN_SOURCE_DIR) + "/recordings/bunny/bun_zipper.ply";
   std::string bunny_conf =
       std::string(SCANCLEAN_BENCH_SHARED_DATA_DIR) + "/stanford_bunny/data/bun.conf";
-  app.add_flag("--quick", quick,
-               "small smoke run: the sphere only, 10k points, sigma 0.02, 5 % uniform outliers, "
-               "speed at 100k (under a minute)");
+  app.add_flag(
+      "--quick", quick,
+      "small smoke run (under a minute): the sphere only, 10k points, sigma 0.02, no WLOP; "
+      "5 % uniform outliers; speed of robust_filter, PCA and SOR at 100k; real data");
   app.add_option("--suite", suite, "which sections to run")
       ->check(CLI::IsMember({"quality", "outliers", "speed", "real", "all"}))
       ->capture_default_str();

@@ -87,7 +87,7 @@ void run_quality_suite(Context& ctx) {
     for (std::size_t si = 0; si < sigmas.size(); ++si) {
       const double sigma = sigmas[si];
       const PeerSettings ps = peer_settings(sigma, n);
-      const bool with_wlop = ctx.wlop_max_n == 0 || n <= ctx.wlop_max_n;
+      const bool with_wlop = !ctx.quick && (ctx.wlop_max_n == 0 || n <= ctx.wlop_max_n);
       auto methods = smoothing_methods(ps, ctx.threads, with_wlop);
       for (const auto& m : methods)
         settings.rows.push_back({fmt_count(n), fmt(sigma, 2), m.name, m.settings});
@@ -142,7 +142,9 @@ void run_quality_suite(Context& ctx) {
   std::ostringstream shapes_list;
   for (std::size_t i = 0; i < shapes.size(); ++i)
     shapes_list << (i ? ", " : "") << shapes[i]->name();
-  if (ctx.wlop_max_n != 0 && sizes.back() > ctx.wlop_max_n)
+  if (ctx.quick)
+    avg.notes.push_back("Quick run: CGAL wlop left out (about 10 s per 10k instance).");
+  if (!ctx.quick && ctx.wlop_max_n != 0 && sizes.back() > ctx.wlop_max_n)
     avg.notes.push_back("CGAL wlop was run only up to N = " + fmt_count(ctx.wlop_max_n) +
                         " (--wlop-max-n; it takes about a minute per 50k instance here).");
   avg.notes.push_back("Shapes averaged: " + shapes_list.str() + ".");

@@ -171,7 +171,7 @@ void run_speed_suite(Context& ctx) {
   std::vector<std::size_t> peer_sizes;
   if (ctx.quick) {
     ours = {{"filter", 100000}};
-    peers = {"jet", "pca", "sor"};
+    peers = {"pca", "sor"};
     peer_sizes = {100000};
   } else {
     ours = {{"filter", 100000}, {"filter", 1000000}, {"filter_adaptive250", 2100000}};
