@@ -43,6 +43,21 @@ std::string driver_folder() {
   return (std::filesystem::path(info.dli_fname).parent_path() / "OpenNI2" / "Drivers").string();
 }
 
+//! Marks the driver modules OpenNI2 just loaded as never-unloaded (RTLD_NODELETE). OpenNI2
+//! dlclose()s its drivers at shutdown; keeping them mapped means a late callback from a driver
+//! thread can never jump into unmapped code, repeated initialize/shutdown cycles reuse the
+//! loaded modules, and LeakSanitizer can attribute the drivers' own process-lifetime
+//! allocations to libOniFile.so & co (tests/lsan.supp) instead of "<unknown module>".
+void pin_driver_modules() {
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(driver_folder(), ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.size() < 5 || name.compare(name.size() - 5, 5, ".so.0") != 0) continue;
+    // RTLD_NOLOAD: only modules OpenNI2 has loaded; the extra reference is kept on purpose.
+    dlopen(entry.path().c_str(), RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
+  }
+}
+
 // Process-wide OpenNI::initialize / shutdown, reference counted.
 std::mutex g_context_mutex;
 int g_context_refs = 0;
@@ -56,6 +71,7 @@ class ContextRef {
       if (rc != openni::STATUS_OK)
         throw UnavailableError("OpenNI2 could not be initialized (driver folder " +
                                driver_folder() + "): " + extended_error());
+      pin_driver_modules();
     }
     ++g_context_refs;
   }
