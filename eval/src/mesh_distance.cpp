@@ -132,7 +132,8 @@ std::uint32_t MeshDistance::build(std::uint32_t begin, std::uint32_t end,
 }
 
 namespace {
-double box_distance2(const Eigen::Vector3d& p, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+double box_distance2(const Eigen::Vector3d& p, const Eigen::Vector3d& lo,
+                     const Eigen::Vector3d& hi) {
   const Eigen::Vector3d d = (lo - p).cwiseMax(p - hi).cwiseMax(0.0);
   return d.squaredNorm();
 }

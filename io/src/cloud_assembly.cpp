@@ -36,9 +36,11 @@ PointCloud assemble_cloud(std::vector<Column>& columns, std::size_t n, Organized
     for (const auto& c : columns) found += (found.empty() ? "" : " ") + c.name;
     throw InputError(file, "header",
                      std::string("the ") + element_word + " data have no " +
-                         (cx < 0 ? "x" : cy < 0 ? "y" : "z") +
-                         " field; expected x, y and z (found: " +
-                         (found.empty() ? "none" : found) + ")");
+                         (cx < 0   ? "x"
+                          : cy < 0 ? "y"
+                                   : "z") +
+                         " field; expected x, y and z (found: " + (found.empty() ? "none" : found) +
+                         ")");
   }
   PointCloud cloud;
   cloud.positions.resize(n);
@@ -56,9 +58,9 @@ PointCloud assemble_cloud(std::vector<Column>& columns, std::size_t n, Organized
   if (nx >= 0 && ny >= 0 && nz >= 0) {
     cloud.normals.resize(n);
     for (std::size_t i = 0; i < n; ++i)
-      cloud.normals[i] = Eigen::Vector3d(columns[nx].values[i], columns[ny].values[i],
-                                         columns[nz].values[i])
-                             .cast<float>();
+      cloud.normals[i] =
+          Eigen::Vector3d(columns[nx].values[i], columns[ny].values[i], columns[nz].values[i])
+              .cast<float>();
     used[nx] = used[ny] = used[nz] = true;
   }
   if (int c = find_column(columns, {"confidence"}); c >= 0) {
@@ -111,9 +113,10 @@ PointCloud assemble_cloud(std::vector<Column>& columns, std::size_t n, Organized
   for (std::size_t i = 0; i < n; ++i) {
     if (cloud.positions[i].allFinite()) continue;
     if (policy == InvalidPolicy::kReject)
-      throw InputError(file, place_of(i),
-                       element_word + " " + std::to_string(i) +
-                           " has a non-finite coordinate (NaN or infinity); expected finite x, y, z");
+      throw InputError(
+          file, place_of(i),
+          element_word + " " + std::to_string(i) +
+              " has a non-finite coordinate (NaN or infinity); expected finite x, y, z");
     ++invalid;
   }
   if (invalid > 0) {

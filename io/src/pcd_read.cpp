@@ -2,8 +2,8 @@
 #include <lzf.h>
 
 #include <cmath>
-#include <limits>
 #include <cstring>
+#include <limits>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -59,9 +59,9 @@ PcdHeader parse_header(const std::string& bytes, const std::string& file, ReadRe
   auto number = [&](std::string_view t, const char* what) -> std::uint64_t {
     const auto v = io_detail::parse_int(t);
     if (!v || *v < 0)
-      throw InputError(file, line_place(line),
-                       std::string("expected a non-negative integer for ") + what + ", found " +
-                           quote(t));
+      throw InputError(
+          file, line_place(line),
+          std::string("expected a non-negative integer for ") + what + ", found " + quote(t));
     return static_cast<std::uint64_t>(*v);
   };
   while (true) {
@@ -108,9 +108,9 @@ PcdHeader parse_header(const std::string& bytes, const std::string& file, ReadRe
           h.fields[i].size = static_cast<int>(s);
         } else if (kw == "TYPE") {
           if (t[i].size() != 1 || (t[i][0] != 'F' && t[i][0] != 'I' && t[i][0] != 'U'))
-            throw InputError(file, place,
-                             "TYPE " + quote(t[i]) + " of field '" + h.fields[i].name +
-                                 "'; expected F, I or U");
+            throw InputError(
+                file, place,
+                "TYPE " + quote(t[i]) + " of field '" + h.fields[i].name + "'; expected F, I or U");
           h.fields[i].type = t[i][0];
         } else {
           const std::uint64_t c = number(t[i], "COUNT");
@@ -141,11 +141,15 @@ PcdHeader parse_header(const std::string& bytes, const std::string& file, ReadRe
         is_identity = v && *v == *io_detail::parse_double(identity[i]);
       }
       if (!is_identity)
-        warn("VIEWPOINT " + quote(l.substr(l.find_first_not_of(" \t", 9) == std::string_view::npos ? l.size() : l.find_first_not_of(" \t", 9))) + " is not applied to the points (kept in sensor frame)");
+        warn("VIEWPOINT " +
+             quote(l.substr(l.find_first_not_of(" \t", 9) == std::string_view::npos
+                                ? l.size()
+                                : l.find_first_not_of(" \t", 9))) +
+             " is not applied to the points (kept in sensor frame)");
     } else if (kw == "DATA") {
       if (t.size() != 1 || (t[0] != "ascii" && t[0] != "binary" && t[0] != "binary_compressed"))
         throw InputError(file, place,
-                         "unknown DATA encoding " + quote(rest) +
+                         "unknown DATA encoding " + quote(t.empty() ? std::string_view() : t[0]) +
                              "; expected ascii, binary or binary_compressed");
       h.data = std::string(t[0]);
       break;
@@ -194,20 +198,29 @@ double load_value(const unsigned char* p, const Field& f) {
     return v;
   };
   switch (f.type) {
-    case 'F': return f.size == 4 ? static_cast<double>(get(float{})) : get(double{});
+    case 'F':
+      return f.size == 4 ? static_cast<double>(get(float{})) : get(double{});
     case 'I':
       switch (f.size) {
-        case 1: return get(std::int8_t{});
-        case 2: return get(std::int16_t{});
-        case 4: return get(std::int32_t{});
-        default: return static_cast<double>(get(std::int64_t{}));
+        case 1:
+          return get(std::int8_t{});
+        case 2:
+          return get(std::int16_t{});
+        case 4:
+          return get(std::int32_t{});
+        default:
+          return static_cast<double>(get(std::int64_t{}));
       }
     default:
       switch (f.size) {
-        case 1: return get(std::uint8_t{});
-        case 2: return get(std::uint16_t{});
-        case 4: return get(std::uint32_t{});
-        default: return static_cast<double>(get(std::uint64_t{}));
+        case 1:
+          return get(std::uint8_t{});
+        case 2:
+          return get(std::uint16_t{});
+        case 4:
+          return get(std::uint32_t{});
+        default:
+          return static_cast<double>(get(std::uint64_t{}));
       }
   }
 }
@@ -260,7 +273,8 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
     if (f.count > 1) {
       if (report)
         report->warnings.push_back(file + ": header: field '" + f.name + "' with COUNT " +
-                                   std::to_string(f.count) + " skipped (only COUNT 1 fields are kept)");
+                                   std::to_string(f.count) +
+                                   " skipped (only COUNT 1 fields are kept)");
       continue;
     }
     if (is_colour(f) && colour_field < 0) {
@@ -287,8 +301,8 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
     if (n * h.point_step > remaining)
       throw InputError(file, byte_place(h.data_offset),
                        "binary data of " + std::to_string(n) + " points x " +
-                           std::to_string(h.point_step) + " bytes = " +
-                           std::to_string(n * h.point_step) + " bytes expected, " +
+                           std::to_string(h.point_step) +
+                           " bytes = " + std::to_string(n * h.point_step) + " bytes expected, " +
                            std::to_string(remaining) + " present (truncated file?)");
   }
   for (auto& c : columns) c.values.reserve(n);
@@ -330,17 +344,18 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
           if (f.type == 'F') {
             const auto v = io_detail::parse_double(toks[t]);
             if (!v)
-              throw InputError(file, line_place(line),
-                               "field '" + f.name + "': expected a number, found " + quote(toks[t]));
+              throw InputError(
+                  file, line_place(line),
+                  "field '" + f.name + "': expected a number, found " + quote(toks[t]));
             const float fv = static_cast<float>(*v);
             std::memcpy(&bits, &fv, 4);
           } else {
             const auto v = io_detail::parse_int(toks[t]);
             if (!v || *v < std::numeric_limits<std::int32_t>::min() ||
                 *v > std::numeric_limits<std::uint32_t>::max())
-              throw InputError(file, line_place(line),
-                               "field '" + f.name + "': expected a 32-bit integer, found " +
-                                   quote(toks[t]));
+              throw InputError(
+                  file, line_place(line),
+                  "field '" + f.name + "': expected a 32-bit integer, found " + quote(toks[t]));
             bits = static_cast<std::uint32_t>(*v);
           }
           colours.push_back(bits);
@@ -390,9 +405,8 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
       // LZF expands at most ~88x (264-byte matches in 3-byte codes): reject lying sizes early.
       if (static_cast<std::uint64_t>(usize) > 100ull * csize + 1024)
         throw InputError(file, byte_place(h.data_offset),
-                         "uncompressed size " + std::to_string(usize) +
-                             " cannot come from a " + std::to_string(csize) +
-                             "-byte LZF payload (header or sizes corrupt)");
+                         "uncompressed size " + std::to_string(usize) + " cannot come from a " +
+                             std::to_string(csize) + "-byte LZF payload (header or sizes corrupt)");
       if (usize > 0) {
         decompressed.resize(usize);
         const unsigned got = lzf_decompress(base + 8, csize, decompressed.data(), usize);
@@ -408,8 +422,8 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
       for (std::size_t k = 0; k < h.fields.size(); ++k) {
         const Field& f = h.fields[k];
         if (column_of[k] < 0 && static_cast<int>(k) != colour_field) continue;
-        const unsigned char* p = soa ? base + n * f.offset + i * f.count * f.size
-                                     : base + i * h.point_step + f.offset;
+        const unsigned char* p =
+            soa ? base + n * f.offset + i * f.count * f.size : base + i * h.point_step + f.offset;
         if (static_cast<int>(k) == colour_field)
           colours.push_back(packed_colour(p, f));
         else
@@ -417,8 +431,8 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
       }
     }
     if (h.data == "binary" && n * h.point_step < remaining && report)
-      report->warnings.push_back(file + ": " + byte_place(h.data_offset + n * h.point_step) +
-                                 ": " + std::to_string(remaining - n * h.point_step) +
+      report->warnings.push_back(file + ": " + byte_place(h.data_offset + n * h.point_step) + ": " +
+                                 std::to_string(remaining - n * h.point_step) +
                                  " bytes after the declared POINTS ignored");
   }
 
@@ -450,12 +464,11 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
   }
   const bool ascii = h.data == "ascii";
   const std::uint64_t first_line = h.data_line;
-  return io_detail::assemble_cloud(columns, static_cast<std::size_t>(n), std::move(grid), file,
-                                   "point", io_detail::InvalidPolicy::kDrop, report,
-                                   [&](std::size_t i) {
-                                     return ascii ? line_place(first_line + i)
-                                                  : std::string("point data");
-                                   });
+  return io_detail::assemble_cloud(
+      columns, static_cast<std::size_t>(n), std::move(grid), file, "point",
+      io_detail::InvalidPolicy::kDrop, report, [&](std::size_t i) {
+        return ascii ? line_place(first_line + i) : std::string("point data");
+      });
 }
 
 }  // namespace scanclean

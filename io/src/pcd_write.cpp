@@ -20,8 +20,8 @@ namespace {
 
 struct OutField {
   std::string name;
-  char type;  // F I U
-  int size;   // 1 4 8
+  char type;                               // F I U
+  int size;                                // 1 4 8
   std::function<double(std::size_t)> get;  // point index -> value
   bool packed_rgba = false;                // the value is a uint32 bit pattern
 };
@@ -32,11 +32,16 @@ OutField attribute_field(const Attribute& a) {
   for (char& c : name)
     if (c == ' ' || c == '\t' || c == '\n' || c == '\r') c = '_';
   switch (a.type) {
-    case AttributeType::kUInt8: return {name, 'U', 1, get};
-    case AttributeType::kInt32: return {name, 'I', 4, get};
-    case AttributeType::kUInt32: return {name, 'U', 4, get};
-    case AttributeType::kFloat32: return {name, 'F', 4, get};
-    case AttributeType::kFloat64: return {name, 'F', 8, get};
+    case AttributeType::kUInt8:
+      return {name, 'U', 1, get};
+    case AttributeType::kInt32:
+      return {name, 'I', 4, get};
+    case AttributeType::kUInt32:
+      return {name, 'U', 4, get};
+    case AttributeType::kFloat32:
+      return {name, 'F', 4, get};
+    case AttributeType::kFloat64:
+      return {name, 'F', 8, get};
   }
   return {name, 'F', 8, get};
 }
@@ -44,8 +49,9 @@ OutField attribute_field(const Attribute& a) {
 template <class I>
 I clamp_int(double v) {
   if (std::isnan(v)) return 0;
-  return static_cast<I>(std::llround(std::clamp(v, static_cast<double>(std::numeric_limits<I>::min()),
-                                                static_cast<double>(std::numeric_limits<I>::max()))));
+  return static_cast<I>(
+      std::llround(std::clamp(v, static_cast<double>(std::numeric_limits<I>::min()),
+                              static_cast<double>(std::numeric_limits<I>::max()))));
 }
 
 //! Stores one value at p (little-endian host assumed, as PCD binary is host order in practice).
@@ -70,7 +76,8 @@ void store(unsigned char* p, const OutField& f, double v) {
 
 std::string ascii_value(const OutField& f, double v) {
   if (f.type == 'F')
-    return f.size == 4 ? io_detail::format_float(static_cast<float>(v)) : io_detail::format_double(v);
+    return f.size == 4 ? io_detail::format_float(static_cast<float>(v))
+                       : io_detail::format_double(v);
   if (f.type == 'I') return std::to_string(clamp_int<std::int32_t>(v));
   if (f.size == 1) return std::to_string(clamp_int<std::uint8_t>(v));
   return std::to_string(clamp_int<std::uint32_t>(v));
@@ -127,11 +134,11 @@ void write_pcd(const std::filesystem::path& path, const PointCloud& cloud,
                       },
                       true});
   if (cloud.has_intensities())
-    fields.push_back({"intensity", 'F', 4,
-                      [&cloud](std::size_t i) { return double(cloud.intensities[i]); }});
+    fields.push_back(
+        {"intensity", 'F', 4, [&cloud](std::size_t i) { return double(cloud.intensities[i]); }});
   if (cloud.has_confidences())
-    fields.push_back({"confidence", 'F', 4,
-                      [&cloud](std::size_t i) { return double(cloud.confidences[i]); }});
+    fields.push_back(
+        {"confidence", 'F', 4, [&cloud](std::size_t i) { return double(cloud.confidences[i]); }});
   for (const auto& a : cloud.attributes) fields.push_back(attribute_field(a));
 
   std::string header =
@@ -185,7 +192,8 @@ void write_pcd(const std::filesystem::path& path, const PointCloud& cloud,
         store(p, fields[f], value(f, c));
       }
     if (!soa) {
-      os.write(reinterpret_cast<const char*>(data.data()), static_cast<std::streamsize>(data.size()));
+      os.write(reinterpret_cast<const char*>(data.data()),
+               static_cast<std::streamsize>(data.size()));
       return;
     }
     if (data.size() > std::numeric_limits<std::uint32_t>::max() / 2)

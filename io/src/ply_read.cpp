@@ -23,7 +23,16 @@ using io_detail::Column;
 using io_detail::next_token;
 using io_detail::quote;
 
-enum class PlyType : std::uint8_t { kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kFloat32, kFloat64 };
+enum class PlyType : std::uint8_t {
+  kInt8,
+  kUInt8,
+  kInt16,
+  kUInt16,
+  kInt32,
+  kUInt32,
+  kFloat32,
+  kFloat64
+};
 
 struct TypeInfo {
   const char* name;
@@ -160,8 +169,8 @@ Header parse_header(const std::string& bytes, const std::string& file, ReadRepor
                            "unknown list type in " + quote(l) + "; expected 'property list " +
                                "<count type> <item type> <name>' with types " + kTypeList);
         if (info(*c).floating)
-          throw InputError(file, place, "list count type must be an integer type, found " +
-                                            quote(ct));
+          throw InputError(file, place,
+                           "list count type must be an integer type, found " + quote(ct));
         p.is_list = true;
         p.count_type = *c;
         p.type = *i;
@@ -310,7 +319,8 @@ class Body {
   T load() {
     T v;
     std::memcpy(&v, data_ + pos_, sizeof(T));
-    const bool swap = (format_ == Format::kBigEndian) == (std::endian::native == std::endian::little);
+    const bool swap =
+        (format_ == Format::kBigEndian) == (std::endian::native == std::endian::little);
     if (swap && sizeof(T) > 1) {
       unsigned char b[sizeof(T)];
       std::memcpy(b, &v, sizeof(T));
@@ -324,18 +334,26 @@ class Body {
   double binary_value(PlyType t, const Property& p) {
     const TypeInfo& ti = info(t);
     if (remaining() < static_cast<std::size_t>(ti.size))
-      fail(std::string("unexpected end of file: expected ") + std::to_string(ti.size) +
-           " bytes (" + ti.name + ") for property '" + p.name + "', " +
-           std::to_string(remaining()) + " left (truncated file or element count too large)");
+      fail(std::string("unexpected end of file: expected ") + std::to_string(ti.size) + " bytes (" +
+           ti.name + ") for property '" + p.name + "', " + std::to_string(remaining()) +
+           " left (truncated file or element count too large)");
     switch (t) {
-      case PlyType::kInt8: return load<std::int8_t>();
-      case PlyType::kUInt8: return load<std::uint8_t>();
-      case PlyType::kInt16: return load<std::int16_t>();
-      case PlyType::kUInt16: return load<std::uint16_t>();
-      case PlyType::kInt32: return load<std::int32_t>();
-      case PlyType::kUInt32: return load<std::uint32_t>();
-      case PlyType::kFloat32: return load<float>();
-      case PlyType::kFloat64: return load<double>();
+      case PlyType::kInt8:
+        return load<std::int8_t>();
+      case PlyType::kUInt8:
+        return load<std::uint8_t>();
+      case PlyType::kInt16:
+        return load<std::int16_t>();
+      case PlyType::kUInt16:
+        return load<std::uint16_t>();
+      case PlyType::kInt32:
+        return load<std::int32_t>();
+      case PlyType::kUInt32:
+        return load<std::uint32_t>();
+      case PlyType::kFloat32:
+        return load<float>();
+      case PlyType::kFloat64:
+        return load<double>();
     }
     return 0;
   }
@@ -365,13 +383,12 @@ void check_sizes(const Header& h, std::size_t file_size, const std::string& file
     if (h.format == Format::kAscii && per == 0) per = 1;
     need += per * static_cast<double>(e.count);
     if (need > remaining + 1)
-      throw InputError(
-          file, line_place(e.header_line),
-          "element " + e.name + " declares " + std::to_string(e.count) +
-              " entries; with the elements before it that needs at least " +
-              std::to_string(static_cast<std::uint64_t>(need)) + " bytes, but only " +
-              std::to_string(file_size - h.data_offset) +
-              " bytes follow the header (truncated file or wrong count)");
+      throw InputError(file, line_place(e.header_line),
+                       "element " + e.name + " declares " + std::to_string(e.count) +
+                           " entries; with the elements before it that needs at least " +
+                           std::to_string(static_cast<std::uint64_t>(need)) + " bytes, but only " +
+                           std::to_string(file_size - h.data_offset) +
+                           " bytes follow the header (truncated file or wrong count)");
   }
 }
 
@@ -405,9 +422,12 @@ void skip_element(Body& body, const Element& e) {
 
 const char* format_name(Format f) {
   switch (f) {
-    case Format::kAscii: return "ascii";
-    case Format::kLittleEndian: return "binary_little_endian";
-    case Format::kBigEndian: return "binary_big_endian";
+    case Format::kAscii:
+      return "ascii";
+    case Format::kLittleEndian:
+      return "binary_little_endian";
+    case Format::kBigEndian:
+      return "binary_big_endian";
   }
   return "";
 }
@@ -440,9 +460,9 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
   if (!vertex)
     throw InputError(file, "header", "no 'element vertex' in the header; expected the points");
   if (vertex->count > static_cast<std::uint64_t>(std::numeric_limits<std::int32_t>::max()))
-    throw InputError(file, line_place(vertex->header_line),
-                     "too many vertices (" + std::to_string(vertex->count) +
-                         "); at most 2^31-1 are supported");
+    throw InputError(
+        file, line_place(vertex->header_line),
+        "too many vertices (" + std::to_string(vertex->count) + "); at most 2^31-1 are supported");
   const std::size_t n = static_cast<std::size_t>(vertex->count);
 
   if (report) {
@@ -496,9 +516,9 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
     } else if (!mesh && e.name == "range_grid" && e.properties.size() == 1 &&
                e.properties[0].is_list && !info(e.properties[0].type).floating) {
       const auto rows = obj_info_int(h, "num_rows"), cols = obj_info_int(h, "num_cols");
-      const bool usable = rows && cols &&
-                          static_cast<std::uint64_t>(*rows) * static_cast<std::uint64_t>(*cols) ==
-                              e.count;
+      const bool usable =
+          rows && cols &&
+          static_cast<std::uint64_t>(*rows) * static_cast<std::uint64_t>(*cols) == e.count;
       if (!usable && report)
         report->warnings.push_back(
             file + ": " + line_place(e.header_line) + ": range_grid with " +
@@ -527,8 +547,8 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
     } else if (mesh && e.name == "face") {
       int list_prop = -1;
       for (std::size_t k = 0; k < e.properties.size(); ++k)
-        if (e.properties[k].is_list && (e.properties[k].name == "vertex_indices" ||
-                                        e.properties[k].name == "vertex_index"))
+        if (e.properties[k].is_list &&
+            (e.properties[k].name == "vertex_indices" || e.properties[k].name == "vertex_index"))
           list_prop = static_cast<int>(k);
       if (list_prop < 0)
         throw InputError(file, line_place(e.header_line),
@@ -585,8 +605,7 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
   const std::uint64_t first_line = h.data_line;
   out.cloud = assemble_cloud(
       columns, n, std::move(grid), file, "vertex",
-      mesh ? InvalidPolicy::kReject : InvalidPolicy::kDrop, report,
-      [&](std::size_t i) {
+      mesh ? InvalidPolicy::kReject : InvalidPolicy::kDrop, report, [&](std::size_t i) {
         return fmt == Format::kAscii ? line_place(first_line + i) : std::string("vertex data");
       });
   return out;
@@ -602,7 +621,8 @@ TriangleMesh read_triangle_mesh(const std::filesystem::path& ply, ReadReport* re
   ReadReport local;
   io_detail::PlyContent c = io_detail::read_ply_content(ply, report ? report : &local, true);
   if (c.triangles.empty())
-    throw InputError(ply.string(), "header", "no triangles: expected an element face with polygons");
+    throw InputError(ply.string(), "header",
+                     "no triangles: expected an element face with polygons");
   TriangleMesh mesh;
   mesh.vertices = std::move(c.cloud.positions);
   mesh.triangles = std::move(c.triangles);

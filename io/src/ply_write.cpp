@@ -2,9 +2,9 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <limits>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -26,22 +26,32 @@ struct OutColumn {
 
 const char* ply_name(Out t) {
   switch (t) {
-    case Out::kUInt8: return "uchar";
-    case Out::kInt32: return "int";
-    case Out::kUInt32: return "uint";
-    case Out::kFloat32: return "float";
-    case Out::kFloat64: return "double";
+    case Out::kUInt8:
+      return "uchar";
+    case Out::kInt32:
+      return "int";
+    case Out::kUInt32:
+      return "uint";
+    case Out::kFloat32:
+      return "float";
+    case Out::kFloat64:
+      return "double";
   }
   return "";
 }
 
 Out out_type(AttributeType t) {
   switch (t) {
-    case AttributeType::kUInt8: return Out::kUInt8;
-    case AttributeType::kInt32: return Out::kInt32;
-    case AttributeType::kUInt32: return Out::kUInt32;
-    case AttributeType::kFloat32: return Out::kFloat32;
-    case AttributeType::kFloat64: return Out::kFloat64;
+    case AttributeType::kUInt8:
+      return Out::kUInt8;
+    case AttributeType::kInt32:
+      return Out::kInt32;
+    case AttributeType::kUInt32:
+      return Out::kUInt32;
+    case AttributeType::kFloat32:
+      return Out::kFloat32;
+    case AttributeType::kFloat64:
+      return Out::kFloat64;
   }
   return Out::kFloat64;
 }
@@ -75,20 +85,40 @@ I clamp_int(double v) {
 void put_value(std::string& buf, Out t, double v, bool ascii) {
   if (ascii) {
     switch (t) {
-      case Out::kUInt8: buf += std::to_string(clamp_int<std::uint8_t>(v)); break;
-      case Out::kInt32: buf += std::to_string(clamp_int<std::int32_t>(v)); break;
-      case Out::kUInt32: buf += std::to_string(clamp_int<std::uint32_t>(v)); break;
-      case Out::kFloat32: buf += io_detail::format_float(static_cast<float>(v)); break;
-      case Out::kFloat64: buf += io_detail::format_double(v); break;
+      case Out::kUInt8:
+        buf += std::to_string(clamp_int<std::uint8_t>(v));
+        break;
+      case Out::kInt32:
+        buf += std::to_string(clamp_int<std::int32_t>(v));
+        break;
+      case Out::kUInt32:
+        buf += std::to_string(clamp_int<std::uint32_t>(v));
+        break;
+      case Out::kFloat32:
+        buf += io_detail::format_float(static_cast<float>(v));
+        break;
+      case Out::kFloat64:
+        buf += io_detail::format_double(v);
+        break;
     }
     return;
   }
   switch (t) {
-    case Out::kUInt8: put(buf, clamp_int<std::uint8_t>(v)); break;
-    case Out::kInt32: put(buf, clamp_int<std::int32_t>(v)); break;
-    case Out::kUInt32: put(buf, clamp_int<std::uint32_t>(v)); break;
-    case Out::kFloat32: put(buf, static_cast<float>(v)); break;
-    case Out::kFloat64: put(buf, v); break;
+    case Out::kUInt8:
+      put(buf, clamp_int<std::uint8_t>(v));
+      break;
+    case Out::kInt32:
+      put(buf, clamp_int<std::int32_t>(v));
+      break;
+    case Out::kUInt32:
+      put(buf, clamp_int<std::uint32_t>(v));
+      break;
+    case Out::kFloat32:
+      put(buf, static_cast<float>(v));
+      break;
+    case Out::kFloat64:
+      put(buf, v);
+      break;
   }
 }
 
@@ -99,7 +129,8 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
   const bool ascii = encoding == PlyEncoding::kAscii;
   const std::size_t n = cloud.size();
   std::vector<OutColumn> cols;
-  const Out pos_type = io_detail::positions_fit_float(cloud.positions) ? Out::kFloat32 : Out::kFloat64;
+  const Out pos_type =
+      io_detail::positions_fit_float(cloud.positions) ? Out::kFloat32 : Out::kFloat64;
   for (int k = 0; k < 3; ++k)
     cols.push_back({std::string(1, "xyz"[k]), pos_type,
                     [&cloud, k](std::size_t i) { return cloud.positions[i][k]; }});
@@ -120,8 +151,8 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
                       [&cloud, k](std::size_t i) { return double(cloud.colors[i][k]); }});
   }
   for (const auto& a : cloud.attributes)
-    cols.push_back({sanitize(a.name), out_type(a.type),
-                    [&a](std::size_t i) { return a.values[i]; }});
+    cols.push_back(
+        {sanitize(a.name), out_type(a.type), [&a](std::size_t i) { return a.values[i]; }});
 
   std::string header = "ply\nformat ";
   header += ascii ? "ascii 1.0\n" : "binary_little_endian 1.0\n";
@@ -132,7 +163,8 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
     header += "obj_info num_rows " + std::to_string(cloud.grid.rows) + "\n";
   }
   header += "element vertex " + std::to_string(n) + "\n";
-  for (const auto& c : cols) header += std::string("property ") + ply_name(c.type) + " " + c.name + "\n";
+  for (const auto& c : cols)
+    header += std::string("property ") + ply_name(c.type) + " " + c.name + "\n";
   if (grid) {
     header += "element range_grid " + std::to_string(cloud.grid.index.size()) + "\n";
     header += "property list uchar int vertex_indices\n";

@@ -55,15 +55,16 @@ ScanSession read_conf(const std::filesystem::path& conf, ReadReport* report) {
       const std::string_view t = io_detail::next_token(rest);
       const auto d = io_detail::parse_double(t);
       if (name.empty() || !d || !std::isfinite(*d))
-        throw InputError(file, line_place(line),
-                         "expected 'bmesh <file> tx ty tz qx qy qz qw' with 7 finite numbers, found " +
-                             io_detail::quote(l));
+        throw InputError(
+            file, line_place(line),
+            "expected 'bmesh <file> tx ty tz qx qy qz qw' with 7 finite numbers, found " +
+                io_detail::quote(l));
       v[k] = *d;
     }
     if (!io_detail::next_token(rest).empty())
-      throw InputError(file, line_place(line),
-                       "extra values after 'bmesh <file> tx ty tz qx qy qz qw': " +
-                           io_detail::quote(l));
+      throw InputError(
+          file, line_place(line),
+          "extra values after 'bmesh <file> tx ty tz qx qy qz qw': " + io_detail::quote(l));
     const Eigen::Quaterniond q(v[6], v[3], v[4], v[5]);
     if (q.norm() < 0.5 || q.norm() > 2.0)
       throw InputError(file, line_place(line),
@@ -108,8 +109,8 @@ PointCloud read_and_merge_conf(const std::filesystem::path& conf, ReadReport* re
     ++used;
   }
   if (used == 0)
-    throw InputError(conf.string(), "", "none of the " + std::to_string(s.files.size()) +
-                                            " scan files listed exists");
+    throw InputError(conf.string(), "",
+                     "none of the " + std::to_string(s.files.size()) + " scan files listed exists");
   rep.format = "conf";
   rep.encoding = std::to_string(used) + " of " + std::to_string(s.files.size()) + " scans";
   rep.declared_points = declared;

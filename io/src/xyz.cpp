@@ -39,9 +39,9 @@ PointCloud read_xyz(const std::filesystem::path& path, ReadReport* report) {
     if (count == 0) continue;
     if (columns == 0) {
       if (count != 3 && count != 6)
-        throw InputError(file, line_place(line),
-                         "expected 3 numbers (x y z) or 6 (x y z nx ny nz), found " +
-                             std::to_string(count));
+        throw InputError(
+            file, line_place(line),
+            "expected 3 numbers (x y z) or 6 (x y z nx ny nz), found " + std::to_string(count));
       columns = count;
     } else if (count != columns) {
       throw InputError(file, line_place(line),

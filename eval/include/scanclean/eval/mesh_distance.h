@@ -5,6 +5,7 @@
 //! nearest-first branch-and-bound traversal. Units: those of the mesh (metres here).
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -46,7 +47,8 @@ class MeshDistance {
     std::uint32_t first = 0;            //!< leaf: first triangle slot
     std::uint32_t count = 0;            //!< leaf: number of triangles (> 0); inner: 0
   };
-  std::uint32_t build(std::uint32_t begin, std::uint32_t end, std::vector<Eigen::Vector3d>& centroids);
+  std::uint32_t build(std::uint32_t begin, std::uint32_t end,
+                      std::vector<Eigen::Vector3d>& centroids);
 
   std::vector<Eigen::Vector3d> tri_a_, tri_b_, tri_c_;  //!< triangle corners in BVH leaf order
   std::vector<std::size_t> tri_index_;                  //!< original triangle index per slot

@@ -6,15 +6,15 @@
 //! silently (ReadReport lists skipped header lines/fields/elements and dropped points).
 //! Every writer is atomic (core/atomic_file.h): a failed write leaves no partial file.
 //!
-//! | ext        | format  | read                                        | write                       |
+//! | ext        | format  | read                                        | write |
 //! |------------|---------|---------------------------------------------|-----------------------------|
-//! | .ply       | PLY 1.0 | ascii, binary_little_endian,                | binary_little_endian        |
-//! |            |         | binary_big_endian; any vertex property      | (default) or ascii; every   |
-//! |            |         | types; range_grid -> OrganizedGrid          | array + attributes + grid   |
-//! | .pcd       | PCD 0.7 | ascii, binary, binary_compressed (LZF);     | ascii, binary,              |
-//! |            | (.6 .5) | organized (HEIGHT>1) -> OrganizedGrid       | binary_compressed (default) |
-//! | .xyz .txt  | text    | x y z [nx ny nz] per line, # comments       | x y z [nx ny nz]            |
-//! | .conf      | Stanford| read_and_merge_conf (stanford_conf.h)        | -                           |
+//! | .ply       | PLY 1.0 | ascii, binary_little_endian,                | binary_little_endian | |
+//! |         | binary_big_endian; any vertex property      | (default) or ascii; every   | | | |
+//! types; range_grid -> OrganizedGrid          | array + attributes + grid   | | .pcd       | PCD
+//! 0.7 | ascii, binary, binary_compressed (LZF);     | ascii, binary,              | |            |
+//! (.6 .5) | organized (HEIGHT>1) -> OrganizedGrid       | binary_compressed (default) | | .xyz
+//! .txt  | text    | x y z [nx ny nz] per line, # comments       | x y z [nx ny nz]            | |
+//! .conf      | Stanford| read_and_merge_conf (stanford_conf.h)        | - |
 //!
 //! Array mapping (details in ply.h / pcd.h / xyz.h): positions (x y z), normals (nx ny nz /
 //! normal_x ...), confidences (confidence), intensities (intensity), colours (red green blue
