@@ -1,0 +1,63 @@
+#pragma once
+//! \file sl_decode.h
+//! Gray-code decoding: per camera pixel the projector column and row, a validity status and a
+//! confidence (SENSORS.md §5).
+//!
+//! A pixel is valid when
+//!  - it is lit: white - black > black_threshold (the shadow mask of OpenCV's decode(), signed),
+//!  - every bit is readable: |I_k - I_inv_k| >= white_threshold (as GrayCodePattern::getProjPixel),
+//!  - the decoded column < projector width and row < projector height.
+//! Bit k is 1 when I_k > I_inv_k (ties read 0, as OpenCV). Confidence of a valid pixel:
+//! c = min_k |I_k - I_inv_k| / (white - black), clamped to [0, 1]; 0 for invalid pixels.
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "scanclean/core/image.h"
+#include "scanclean/drivers/sl_capture.h"
+
+namespace scanclean {
+
+enum class SlDecoder {
+  kFast,    //!< the project's vectorised decoder (whole-image passes per bit, Gray -> binary)
+  kOpenCV,  //!< cv::structured_light::GrayCodePattern::getProjPixel per pixel (8-bit only)
+};
+
+//! "fast" / "opencv"; parse_sl_decoder throws OptionError for anything else.
+const char* to_string(SlDecoder decoder);
+SlDecoder parse_sl_decoder(const std::string& name);
+
+struct SlDecodeOptions {
+  int white_threshold = 5;   //!< gray levels (of the image bit depth), >= 0
+  int black_threshold = 40;  //!< gray levels, >= 0
+  SlDecoder decoder = SlDecoder::kFast;
+  int threads = 0;  //!< fast decoder: 0 = all cores; the result is identical for any value
+};
+//! \throw OptionError naming the option, the value and the valid range.
+void validate(const SlDecodeOptions& options);
+
+//! Per-pixel outcome.
+enum class SlPixelStatus : std::uint8_t {
+  kValid = 0,
+  kShadow = 1,      //!< white - black <= black_threshold
+  kWeakBit = 2,     //!< some |I_k - I_inv_k| < white_threshold
+  kOutOfRange = 3,  //!< decoded column >= width or row >= height
+};
+
+struct SlDecoded {
+  Image<std::int32_t> column;  //!< projector column, -1 where not valid
+  Image<std::int32_t> row;     //!< projector row, -1 where not valid
+  Image<float> confidence;     //!< [0, 1], 0 where not valid
+  Image<std::uint8_t> status;  //!< SlPixelStatus values
+  std::size_t valid = 0;       //!< pixels with status kValid
+  std::size_t lit = 0;         //!< pixels that are not kShadow
+  double seconds = 0;          //!< decoding time (wall clock, images already in memory)
+  SlDecoder decoder = SlDecoder::kFast;
+};
+
+//! Decodes a loaded capture. The OpenCV decoder needs 8-bit images (it reads them as uchar).
+//! \throw OptionError (bad options, OpenCV decoder on 16-bit images).
+SlDecoded decode_graycode(const SlCapture& capture, const SlDecodeOptions& options = {});
+
+}  // namespace scanclean
