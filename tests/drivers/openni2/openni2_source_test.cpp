@@ -206,7 +206,7 @@ TEST(OpenNI2SourceTest, RecordOniStopsAtMaxFrames) {
   EXPECT_THROW(record_oni("vsensor://" + fx.folder.string(), dir / "z.oni", 0, 0, {}), OptionError);
 }
 
-TEST(OpenNI2SourceTest, MissingInputsAreInputErrors) {
+TEST(OpenNI2SourceTest, BadInputsGiveClearErrors) {
   const auto dir = test::make_temp_dir("missing");
   try {
     open_source((dir / "nothere.oni").string());
@@ -222,6 +222,20 @@ TEST(OpenNI2SourceTest, MissingInputsAreInputErrors) {
   }
   EXPECT_THROW(make_openni2_source("x.oni", OpenNI2Options{false, -1}), OptionError);
   EXPECT_THROW(open_source("openni2://Dummy"), UnavailableError);
+  // A bad virtual-sensor parameter: the driver's own message comes back through OpenNI2.
+  const auto fx = write_vs_fixture(dir / "rec", 1);
+  try {
+    open_source("vsensor://" + fx.folder.string() + "?pace=fast");
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("pace must be manual or realtime"), std::string::npos)
+        << e.what();
+  }
+  // A folder without frames.csv rows is still a recording: 0 frames, then end of stream.
+  const auto empty = write_vs_fixture(dir / "empty", 0);
+  auto src = open_source("vsensor://" + empty.folder.string());
+  RangeFrame f;
+  EXPECT_EQ(src->next(f, 100ms), ReadStatus::kEndOfStream);
 }
 
 TEST(OpenNI2SourceTest, NoSensorInPrivateFolderIsUnavailable) {
