@@ -94,20 +94,19 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
     const float c = std::floor((p[a] - lo_[a]) * inv_cell_);
     return static_cast<std::int32_t>(std::clamp(c, 0.0f, static_cast<float>(dims_[a] - 1)));
   };
-  struct Entry {
+  struct Entry {  // 16 bytes; the Morton code identifies the cell
     std::uint64_t morton;
-    std::uint64_t key;
-    std::uint32_t id;
+    std::uint64_t id;
   };
   std::vector<Entry> entries(n);
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i < r.end(); ++i) {
-          const auto& p = points[i];
-          const std::int32_t x = coords(p, 0), y = coords(p, 1), z = coords(p, 2);
-          entries[i] = {morton(x, y, z), detail::cell_key(x, y, z), static_cast<std::uint32_t>(i)};
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) {
+                        const auto& p = points[i];
+                        const std::int32_t x = coords(p, 0), y = coords(p, 1), z = coords(p, 2);
+                        entries[i] = {morton(x, y, z), static_cast<std::uint64_t>(i)};
+                      }
+                    });
   tbb::parallel_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
     return a.morton != b.morton ? a.morton < b.morton : a.id < b.id;
   });
@@ -117,18 +116,21 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t s = r.begin(); s < r.end(); ++s) {
-                        ids_[s] = entries[s].id;
+                        ids_[s] = static_cast<std::uint32_t>(entries[s].id);
                         inv_[entries[s].id] = static_cast<std::uint32_t>(s);
                         pts_[s] = points[entries[s].id];
                       }
                     });
+  std::vector<Eigen::Vector3f>().swap(points);
   std::vector<std::uint64_t> keys;
   for (std::size_t s = 0; s < n; ++s) {
-    if (s == 0 || entries[s].key != entries[s - 1].key) {
+    if (s == 0 || entries[s].morton != entries[s - 1].morton) {
       cell_begin_.push_back(static_cast<std::uint32_t>(s));
-      keys.push_back(entries[s].key);
+      const auto& p = pts_[s];
+      keys.push_back(detail::cell_key(coords(p, 0), coords(p, 1), coords(p, 2)));
     }
   }
+  std::vector<Entry>().swap(entries);
   cell_begin_.push_back(static_cast<std::uint32_t>(n));
   std::size_t cap = 16;
   while (cap < 2 * keys.size()) cap *= 2;

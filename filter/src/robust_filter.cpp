@@ -198,8 +198,10 @@ struct Params {
 // Builds the kernels of all points of d. `nref` receives each point's kernel normal (zero if it
 // has no kernel). With kSlots, idx's slots are d's indices; otherwise idx's ids are.
 template <bool kSlots>
-KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params& prm,
-                        std::vector<Eigen::Vector3f>& nref, const std::string& phase) {
+KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_index,
+                        const Params& prm, std::vector<Eigen::Vector3f>& nref,
+                        const std::string& phase) {
+  const NeighborIndex& idx = *point_index;
   const std::size_t n = d.p.size();
   const FilterOptions& o = *prm.o;
   constexpr std::size_t R = detail::CandidateBuffer::kRecord;
@@ -242,6 +244,7 @@ KernelSet build_kernels(const Points& d, const NeighborIndex& idx, const Params&
     r[13] = d.w_at(i);
     valid[i] = 1;
   });
+  point_index.reset();  // the point index is not needed any more (memory)
   KernelSet ks;
   for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
   // Compact the valid kernels (in place), index their centres, then permute the records in
@@ -765,8 +768,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   {
     t = Clock::now();
     std::vector<Eigen::Vector3f> nref;
-    KernelSet ks = build_kernels<true>(d, *index, prm, nref, "kernels");
-    index.reset();
+    KernelSet ks = build_kernels<true>(d, index, prm, nref, "kernels");
     x = std::move(d.p);
     st.kernels = ks.fitted;
     st.seconds_kernels += since(t);
@@ -802,7 +804,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       for (std::uint32_t i : sub) d2.w.push_back(d.w[i]);
     if (!d.hi.empty())
       for (std::uint32_t i : sub) d2.hi.push_back(d.hi[i]);
-    NeighborIndex index2(std::move(pf2), prm.cell * 1.001);
+    auto index2 = std::make_unique<NeighborIndex>(std::move(pf2), prm.cell * 1.001);
     std::vector<Eigen::Vector3f> nref2;
     KernelSet ks2 = build_kernels<false>(d2, index2, prm, nref2, "kernels (pass 2)");
     st.seconds_kernels += since(t);
