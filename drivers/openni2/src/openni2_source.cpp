@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -473,9 +474,21 @@ std::size_t record_oni(const std::string& device_uri, const std::filesystem::pat
   OpenNI2Source source(device_uri, options);
   source.open_device(/*start=*/false);
 
-  openni::Recorder recorder;
-  if (recorder.create(out_oni.c_str()) != openni::STATUS_OK)
-    throw IoError(out_oni.string() + ": cannot create the .oni file: " + extended_error());
+  // Check the output first: when oniCreateRecorder fails, Debian's libOpenNI2 frees the
+  // recorder but leaves the handle pointing at it, and Recorder::destroy() then crashes.
+  {
+    std::FILE* probe = std::fopen(out_oni.c_str(), "wb");
+    if (probe == nullptr)
+      throw IoError(out_oni.string() + ": cannot create the .oni file: " + std::strerror(errno));
+    std::fclose(probe);
+  }
+  auto recorder_owner = std::make_unique<openni::Recorder>();
+  if (recorder_owner->create(out_oni.c_str()) != openni::STATUS_OK) {
+    const std::string e = extended_error();
+    recorder_owner.release();  // deliberately leaked: destroying it would crash (see above)
+    throw IoError(out_oni.string() + ": cannot create the .oni file: " + e);
+  }
+  openni::Recorder& recorder = *recorder_owner;
   if (recorder.attach(source.stream(), /*allowLossyCompression=*/false) != openni::STATUS_OK)
     throw UnavailableError("record_oni: cannot attach the depth stream: " + extended_error());
   if (recorder.start() != openni::STATUS_OK)

@@ -204,6 +204,12 @@ TEST(OpenNI2SourceTest, RecordOniStopsAtMaxFrames) {
   auto src = open_source(oni.string());
   EXPECT_EQ(src->info().frame_count.value_or(0), 4u);
   EXPECT_THROW(record_oni("vsensor://" + fx.folder.string(), dir / "z.oni", 0, 0, {}), OptionError);
+  try {
+    record_oni("vsensor://" + fx.folder.string(), dir / "no" / "such" / "dir.oni", 2, 0, {});
+    FAIL() << "expected IoError";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("dir.oni"), std::string::npos) << e.what();
+  }
 }
 
 TEST(OpenNI2SourceTest, BadInputsGiveClearErrors) {
