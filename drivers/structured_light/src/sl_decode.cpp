@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <memory>
 #include <opencv2/structured_light.hpp>
+#include <type_traits>
 #include <vector>
 
 #include "scanclean/core/errors.h"
@@ -43,23 +44,26 @@ void count(SlDecoded& d) {
 // them.
 template <class Pixel>
 struct RowDecoder {
+  // 16-bit lanes throughout (8 per SSE register): value < 2^16 (at most 16 bits per axis),
+  // margin <= 65535; the difference needs int16 for 8-bit and int32 for 16-bit images.
+  using Diff = std::conditional_t<sizeof(Pixel) == 1, std::int16_t, std::int32_t>;
   const SlCapture::Impl& cap;
   const SlDecodeOptions& opt;
   SlDecoded& out;
 
-  void operator()(int y, std::vector<std::int32_t>& value, std::vector<std::int32_t>& margin,
-                  std::vector<std::uint8_t>& binary, std::vector<std::int32_t>& column) const {
+  void operator()(int y, std::vector<std::uint16_t>& value, std::vector<std::uint16_t>& margin,
+                  std::vector<std::uint16_t>& binary, std::vector<std::uint16_t>& column) const {
     const int w = cap.images[0].cols;
     const auto& info = cap.info;
-    std::fill(margin.begin(), margin.end(), 1 << 30);
+    std::fill(margin.begin(), margin.end(), std::uint16_t{65535});
     for (int axis = 0; axis < 2; ++axis) {
       const int bits = axis == 0 ? info.graycode.column_bits : info.graycode.row_bits;
       const int first = axis == 0 ? 0 : 2 * info.graycode.column_bits;
-      std::fill(value.begin(), value.end(), 0);
-      std::fill(binary.begin(), binary.end(), 0);
-      std::int32_t* __restrict v = value.data();
-      std::int32_t* __restrict m = margin.data();
-      std::uint8_t* __restrict b = binary.data();
+      std::fill(value.begin(), value.end(), std::uint16_t{0});
+      std::fill(binary.begin(), binary.end(), std::uint16_t{0});
+      std::uint16_t* __restrict v = value.data();
+      std::uint16_t* __restrict m = margin.data();
+      std::uint16_t* __restrict b = binary.data();
       for (int k = 0; k < bits; ++k) {
         const Pixel* __restrict p =
             cap.images[static_cast<std::size_t>(cap.pattern_indices[first + 2 * k])]
@@ -68,12 +72,12 @@ struct RowDecoder {
             cap.images[static_cast<std::size_t>(cap.pattern_indices[first + 2 * k + 1])]
                 .template ptr<Pixel>(y);
         for (int x = 0; x < w; ++x) {
-          const std::int32_t d = static_cast<std::int32_t>(p[x]) - static_cast<std::int32_t>(q[x]);
-          const std::uint8_t g = d > 0;
-          const std::uint8_t bit = b[x] ^ g;
+          const Diff d = static_cast<Diff>(static_cast<Diff>(p[x]) - static_cast<Diff>(q[x]));
+          const std::uint16_t g = d > 0;
+          const std::uint16_t bit = static_cast<std::uint16_t>(b[x] ^ g);
           b[x] = bit;
-          v[x] = (v[x] << 1) | bit;
-          const std::int32_t a = d < 0 ? -d : d;
+          v[x] = static_cast<std::uint16_t>((v[x] << 1) | bit);
+          const std::uint16_t a = static_cast<std::uint16_t>(d < 0 ? -d : d);
           m[x] = a < m[x] ? a : m[x];
         }
       }
@@ -109,9 +113,8 @@ template <class Pixel>
 void decode_fast(const SlCapture::Impl& cap, const SlDecodeOptions& opt, SlDecoded& out) {
   const int w = cap.images[0].cols, h = cap.images[0].rows;
   auto body = [&](const tbb::blocked_range<int>& r) {
-    std::vector<std::int32_t> value(static_cast<std::size_t>(w)),
-        margin(static_cast<std::size_t>(w)), column(static_cast<std::size_t>(w));
-    std::vector<std::uint8_t> binary(static_cast<std::size_t>(w));
+    const std::size_t n = static_cast<std::size_t>(w);
+    std::vector<std::uint16_t> value(n), margin(n), column(n), binary(n);
     RowDecoder<Pixel> dec{cap, opt, out};
     for (int y = r.begin(); y < r.end(); ++y) dec(y, value, margin, binary, column);
   };

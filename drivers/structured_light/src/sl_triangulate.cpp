@@ -4,7 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
-#include <atomic>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -196,6 +196,63 @@ RangeFrame SlTriangulator::triangulate(const SlDecoded& d, const SlTriangulation
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (stats_out) *stats_out = s;
   return f;
+}
+
+double sl_median_reprojection_px(const SlDecoded& d, const SlCalibration& c, int step,
+                                 int samples) {
+  std::vector<cv::Point2d> cam, proj;
+  std::size_t valid = 0;
+  for (std::int32_t col : d.column.data) valid += col >= 0;
+  if (valid == 0 || samples <= 0 || step < 1) return std::numeric_limits<double>::infinity();
+  const std::size_t stride = std::max<std::size_t>(1, valid / static_cast<std::size_t>(samples));
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < d.column.size(); ++i) {
+    if (d.column.data[i] < 0) continue;
+    if (k++ % stride != 0) continue;
+    cam.emplace_back(static_cast<double>(i % d.column.width),
+                     static_cast<double>(i / d.column.width));
+    proj.emplace_back(double(step) * d.column.data[i], double(step) * d.row.data[i]);
+  }
+  const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-6);
+  std::vector<cv::Point2d> cn, pn;
+  cv::undistortPoints(cam, cn, camera_matrix(c.camera), dist_coeffs(c.camera), cv::noArray(),
+                      cv::noArray(), crit);
+  cv::undistortPoints(proj, pn, camera_matrix(c.projector), dist_coeffs(c.projector), cv::noArray(),
+                      cv::noArray(), crit);
+  std::vector<double> res;
+  for (std::size_t i = 0; i < cn.size(); ++i) {
+    const Eigen::Vector3d rc(cn[i].x, cn[i].y, 1.0);
+    const Eigen::Vector3d Rr = c.R * rc;
+    const double a1 = Rr.x() - pn[i].x * Rr.z(), b1 = c.T.x() - pn[i].x * c.T.z();
+    const double a2 = Rr.y() - pn[i].y * Rr.z(), b2 = c.T.y() - pn[i].y * c.T.z();
+    const double den = a1 * a1 + a2 * a2;
+    double r = std::numeric_limits<double>::infinity();
+    if (den > 1e-12) {
+      const double lambda = -(a1 * b1 + a2 * b2) / den;
+      const Eigen::Vector3d Xp = lambda * Rr + c.T;
+      if (lambda > 0 && Xp.z() > 0)
+        r = std::hypot((Xp.x() / Xp.z() - pn[i].x) * c.projector.fx,
+                       (Xp.y() / Xp.z() - pn[i].y) * c.projector.fy);
+    }
+    res.push_back(r);
+  }
+  std::nth_element(res.begin(), res.begin() + static_cast<std::ptrdiff_t>(res.size() / 2),
+                   res.end());
+  return res[res.size() / 2];
+}
+
+int estimate_graycode_step(const SlDecoded& d, const SlCalibration& c, double* median_px) {
+  int best = 1;
+  double best_res = std::numeric_limits<double>::infinity();
+  for (int step = 1; step <= 4; ++step) {
+    const double r = sl_median_reprojection_px(d, c, step);
+    if (r < best_res) {
+      best_res = r;
+      best = step;
+    }
+  }
+  if (median_px) *median_px = best_res;
+  return best;
 }
 
 }  // namespace scanclean

@@ -76,6 +76,14 @@ SlResult process(const fs::path& folder, const SlOptions& o, TriangulatorCache& 
                          std::to_string(r.calibration.camera.height) + " camera images");
   r.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.decoded = decode_graycode(capture, decode_options(o, r.info));
+  if (o.graycode_step == 0 && r.calibration.layout == "kamino410") {
+    const int step =
+        estimate_graycode_step(r.decoded, r.calibration, &r.step_median_reprojection_px);
+    r.graycode_step_estimated = true;
+    r.calibration.graycode_step = step;
+    r.calibration.projector.width = r.info.graycode.projector_width * step;
+    r.calibration.projector.height = r.info.graycode.projector_height * step;
+  }
   r.frame = cache.get(r.calibration).triangulate(r.decoded, o.triangulation, &r.triangulation);
   return r;
 }

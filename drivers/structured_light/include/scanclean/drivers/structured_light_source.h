@@ -23,8 +23,11 @@ struct SlOptions {
   SlDecoder decoder = SlDecoder::kFast;
   int projector_width = 0;  //!< > 0 overrides / supplies the projector size
   int projector_height = 0;
-  int threads = 0;        //!< decoder threads, 0 = all cores
-  int graycode_step = 0;  //!< > 0 overrides the calibration's graycode_step (see SlCalibration)
+  int threads = 0;  //!< decoder threads, 0 = all cores
+  //! > 0 overrides the calibration's graycode_step (see SlCalibration). 0: the calibration's;
+  //! for kamino410 calibrations, which do not record it, estimated from the decoded pixels
+  //! (estimate_graycode_step).
+  int graycode_step = 0;
   SlTriangulationOptions triangulation;
 };
 //! \throw OptionError naming the option, the value and the valid range.
@@ -44,6 +47,8 @@ struct SlResult {
   SlDecoded decoded;
   RangeFrame frame;
   SlTriangulationStats triangulation;
+  bool graycode_step_estimated = false;    //!< calibration.graycode_step was estimated
+  double step_median_reprojection_px = 0;  //!< the estimate's median error (if estimated)
   double load_seconds = 0;
 };
 //! Loads, decodes and triangulates one capture folder. \throw InputError, OptionError.
