@@ -8,8 +8,8 @@ PeerSettings peer_settings(double sigma, std::size_t n) {
   const int level = sigma <= 0.015 ? 0 : (sigma <= 0.025 ? 1 : 2);
   const bool dense = n >= 30000;
   // Neighbourhood sizes: the best of a grid on a tuning set (--tune: sphere, torus, rounded box,
-  // seed + 1000, never the protocol's instances); see bench/README.md for the tables.
-  static constexpr unsigned kJet[2][3] = {{192, 192, 192}, {576, 576, 576}};
+  // bunny with seed + 1000, never the protocol's instances); see bench/README.md.
+  static constexpr unsigned kJet[2][3] = {{48, 48, 48}, {96, 96, 96}};
   static constexpr unsigned kBil[2][3] = {{24, 24, 48}, {96, 96, 192}};
   static constexpr int kPca[2][3] = {{24, 24, 48}, {96, 96, 192}};
   s.jet_k = kJet[dense][level];
