@@ -600,13 +600,14 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
     report->warnings.push_back(file + ": " + body.place() +
                                ": data after the last declared element ignored");
 
-  const std::string data_place = format_name(h.format);
   const Format fmt = h.format;
   const std::uint64_t first_line = h.data_line;
+  const bool vertex_first = &h.elements.front() == vertex;
   out.cloud = assemble_cloud(
       columns, n, std::move(grid), file, "vertex",
       mesh ? InvalidPolicy::kReject : InvalidPolicy::kDrop, report, [&](std::size_t i) {
-        return fmt == Format::kAscii ? line_place(first_line + i) : std::string("vertex data");
+        return fmt == Format::kAscii && vertex_first ? line_place(first_line + i)
+                                                     : std::string("vertex data");
       });
   return out;
 }

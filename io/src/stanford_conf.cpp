@@ -93,7 +93,7 @@ PointCloud read_and_merge_conf(const std::filesystem::path& conf, ReadReport* re
       const std::string what = "scan file " + s.files[i].string() + " does not exist";
       if (!options.skip_missing)
         throw InputError(conf.string(), line_place(s.lines[i]),
-                         what + " (use skip-missing to merge the scans that exist)");
+                         what + " (skip_missing / --skip-missing merges the scans that exist)");
       rep.warnings.push_back(conf.string() + ": " + line_place(s.lines[i]) + ": " + what +
                              "; skipped");
       continue;

@@ -215,6 +215,14 @@ TEST_F(PlyTest, TriangleMeshReadsFacesAndFansPolygons) {
   const std::string msg = input_error_of([&] { read_triangle_mesh(bad); });
   EXPECT_NE(msg.find("line 13"), std::string::npos) << msg;
   EXPECT_NE(msg.find("out of range"), std::string::npos) << msg;
+  // A mesh cannot drop vertices: a non-finite one is an error naming its line.
+  const auto nan_mesh = file("nanmesh.ply",
+                             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty "
+                             "float y\nproperty float z\nelement face 1\nproperty list uchar int "
+                             "vertex_indices\nend_header\n0 0 0\n1 nan 0\n1 1 0\n3 0 1 2\n");
+  const std::string msg2 = input_error_of([&] { read_triangle_mesh(nan_mesh); });
+  EXPECT_NE(msg2.find("line 11"), std::string::npos) << msg2;
+  EXPECT_NE(msg2.find("vertex 1 has a non-finite coordinate"), std::string::npos) << msg2;
 }
 
 struct Malformed {
