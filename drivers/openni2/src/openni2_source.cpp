@@ -27,6 +27,10 @@
 namespace scanclean {
 namespace {
 
+//! The virtual sensor's "finished" stream property (drivers/openni2_vsensor/src/
+//! vsensor_driver.cpp): 1 once a non-looping stream has delivered its last frame.
+constexpr int kVsensorPropertyFinished = 0x53430001;
+
 constexpr const char* kNoSensor = "no depth sensor found; run scanclean devices";
 
 std::string extended_error() {
@@ -153,6 +157,7 @@ class OpenNI2Source final : public RangeSource {
   DisconnectFlag disconnect_;
   bool listening_ = false;
   bool is_file_ = false;
+  bool virtual_device_ = false;
   SourceInfo info_;
   std::optional<std::uint64_t> frame_count_;
   std::uint64_t delivered_ = 0;
@@ -238,6 +243,7 @@ void OpenNI2Source::open_device(bool start) {
     fail("cannot create the depth stream");
   const std::string dev_uri = device_.getDeviceInfo().getUri();
   const bool virtual_device = starts_with(dev_uri, "vsensor://");
+  virtual_device_ = virtual_device;
   if (kind_ == "openni2" && virtual_device) kind_ = "vsensor";
   if (!is_file_ && !virtual_device) {
     // Live device: pick the requested depth unit, keeping the current resolution and rate.
@@ -353,6 +359,15 @@ ReadStatus OpenNI2Source::next(RangeFrame& frame, std::chrono::milliseconds time
       return ReadStatus::kDisconnected;
     }
     if (frame_count_ && delivered_ >= *frame_count_) {
+      end_of_stream_ = true;
+      return ReadStatus::kEndOfStream;
+    }
+    int finished = 0;
+    if (virtual_device_ &&
+        stream_.getProperty(kVsensorPropertyFinished, &finished) == openni::STATUS_OK &&
+        finished == 1) {
+      // A real-time virtual sensor emitted its last frame (frames a slow reader missed show as
+      // index gaps, as with a real sensor).
       end_of_stream_ = true;
       return ReadStatus::kEndOfStream;
     }

@@ -46,6 +46,11 @@ using oni::driver::StreamBase;
 
 class VsensorDriver;
 
+//! Driver-specific stream property (int, get only): 1 once a non-looping stream has delivered
+//! its last frame. drivers/openni2/src/openni2_source.cpp reads it (same value there) to report
+//! the end of stream without waiting for a frame count that a slow reader may never reach.
+constexpr int kPropertyFinished = 0x53430001;
+
 template <class T>
 OniStatus put(void* data, int* size, const T& value) {
   if (data == nullptr || size == nullptr || *size < static_cast<int>(sizeof(T)))
@@ -132,6 +137,13 @@ class VsensorStream final : public StreamBase {
         // Frames this stream will deliver (finite, non-looping sources only).
         if (uri_.loop) return ONI_STATUS_NOT_SUPPORTED;
         return put(data, size, static_cast<int>(deliverable_frames()));
+      case kPropertyFinished: {
+        std::lock_guard<std::mutex> lock(state_mutex_);
+        bool finished = !uri_.loop;
+        for (std::size_t i = position_; finished && i < provider_.frame_count(); ++i)
+          if (!uri_.dropped(i)) finished = false;
+        return put(data, size, finished ? 1 : 0);
+      }
       default:
         break;
     }
@@ -194,6 +206,8 @@ class VsensorStream final : public StreamBase {
         return TRUE;
       case ONI_STREAM_PROPERTY_NUMBER_OF_FRAMES:
         return uri_.loop ? FALSE : TRUE;
+      case kPropertyFinished:
+        return TRUE;
       case XN_STREAM_PROPERTY_ZERO_PLANE_DISTANCE:
       case XN_STREAM_PROPERTY_ZERO_PLANE_PIXEL_SIZE:
       case XN_STREAM_PROPERTY_EMITTER_DCMOS_DISTANCE:

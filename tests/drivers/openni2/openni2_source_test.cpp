@@ -126,13 +126,17 @@ TEST(OpenNI2SourceTest, ConsecutiveTimeoutsCountAsDisconnect) {
   auto src = open_source("vsensor://" + fx.folder.string() + "?pace=realtime&loop=1", o);
   RangeFrame f;
   std::uint64_t previous = 0;
-  for (int i = 0; i < 5; ++i) {  // looping continues the index sequence: 10..14
+  for (int i = 0; i < 5; ++i) {
     ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << src->last_error();
+    // Looping continues the index sequence (10, 11, 12, 13, ...). A slow reader may miss a
+    // real-time frame (a gap, as with a real sensor), so only require increasing indices; the
+    // content of index k is recorded frame 10 + (k - 10) mod 3.
     if (i > 0) {
-      EXPECT_EQ(f.index, previous + 1);
+      EXPECT_GT(f.index, previous);
     }
     previous = f.index;
-    EXPECT_EQ(vs_mismatches(f, fx.indices[i % 3]), 0u);
+    ASSERT_GE(f.index, 10u);
+    EXPECT_EQ(vs_mismatches(f, 10 + (f.index - 10) % 3), 0u) << "index " << f.index;
   }
   ReadStatus s = ReadStatus::kOk;
   for (int i = 0; i < 3 && s != ReadStatus::kDisconnected; ++i) {
@@ -146,18 +150,27 @@ TEST(OpenNI2SourceTest, RealtimePaceFollowsTimestamps) {
   const auto fx = write_vs_fixture(test::make_temp_dir("vs") / "rec", 5);
   auto src = open_source("vsensor://" + fx.folder.string() + "?pace=realtime");
   RangeFrame f;
-  const auto t0 = std::chrono::steady_clock::now();
-  std::vector<std::int64_t> host;
-  for (int i = 0; i < 5; ++i) {
-    ASSERT_EQ(src->next(f, 2000ms), ReadStatus::kOk) << src->last_error();
-    EXPECT_EQ(f.index, fx.indices[i]);
-    host.push_back(f.host_ts_ns);
+  std::vector<RangeFrame> got;
+  ReadStatus s;
+  while ((s = src->next(f, 2000ms)) == ReadStatus::kOk) got.push_back(f);
+  EXPECT_EQ(s, ReadStatus::kEndOfStream) << src->last_error();
+  // Normally all 5; a reader more than one frame period late (loaded machine) misses frames,
+  // exactly as with a real sensor, and sees index gaps.
+  ASSERT_GE(got.size(), 3u);
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    if (i > 0) {
+      EXPECT_GT(got[i].index, got[i - 1].index);
+    }
+    EXPECT_EQ(vs_mismatches(got[i], got[i].index), 0u);
+    EXPECT_EQ(got[i].device_ts_us, fx.timestamps_us[got[i].index - fx.indices[0]]);
   }
-  const double elapsed =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  // 4 steps of 33.367 ms: at least ~0.13 s (real time), not instantaneous.
-  EXPECT_GE(elapsed, 0.12);
-  EXPECT_EQ(src->next(f, 300ms), ReadStatus::kEndOfStream);
+  // Real-time pacing: frames arrive no faster than recorded (host span >= device span minus at
+  // most one period of read latency on the first frame).
+  const double host_span_us = (got.back().host_ts_ns - got.front().host_ts_ns) / 1000.0;
+  const double device_span_us =
+      static_cast<double>(got.back().device_ts_us - got.front().device_ts_us);
+  EXPECT_GT(device_span_us, 0.0);
+  EXPECT_GE(host_span_us, device_span_us - 34000.0);
 }
 
 TEST(OpenNI2SourceTest, RecordOniThenPlayBackBitExact) {
@@ -342,7 +355,14 @@ TEST(OpenNI2SourceTest, KilledOniRecordingIsReadableUpToItsLastFrame) {
     }
     _exit(0);
   }
-  std::this_thread::sleep_for(1500ms);
+  // Kill it once about ten frames (~92 KB each, high-entropy fixture) reached the file; under
+  // sanitizers and load the recorder starts slowly, so wait for the size, not a fixed time.
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  std::error_code ec;
+  while (std::chrono::steady_clock::now() < deadline &&
+         (!std::filesystem::exists(oni, ec) || std::filesystem::file_size(oni, ec) < 1'000'000))
+    std::this_thread::sleep_for(20ms);
+  std::this_thread::sleep_for(100ms);
   ASSERT_EQ(kill(child, SIGKILL), 0);
   int status = 0;
   ASSERT_EQ(waitpid(child, &status, 0), child);
@@ -363,8 +383,8 @@ TEST(OpenNI2SourceTest, KilledOniRecordingIsReadableUpToItsLastFrame) {
     EXPECT_EQ(vs_mismatches(f, fx.indices[(frames - 1) % fx.indices.size()]), 0u)
         << "frame " << frames;
   }
-  // ~1.4 s at 30 fps minus start-up: tens of frames (at least 10 even on a loaded machine).
-  EXPECT_GE(frames, 10u);
+  // At least the ~10 frames that were in the file before the kill.
+  EXPECT_GE(frames, 8u);
   std::printf("killed .oni: %llu bytes, %zu frames played back (%s)\n",
               static_cast<unsigned long long>(std::filesystem::file_size(oni)), frames,
               src->last_error().c_str());
