@@ -1,0 +1,97 @@
+// scanclean capture: live capture-and-clean from any source URI (a sensor through openni2://,
+// vsensor://, or a file), optionally recording the raw frames to a recording folder.
+
+#if defined(SCANCLEAN_HAVE_IO) && defined(SCANCLEAN_HAVE_FILTER) &&        \
+    defined(SCANCLEAN_HAVE_PIPELINE) && defined(SCANCLEAN_HAVE_SOURCES) && \
+    defined(SCANCLEAN_HAVE_REPLAY)
+
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "scanclean/command.h"
+#include "scanclean/core/errors.h"
+#include "scanclean/drivers/make_range_source.h"
+#include "scanclean/pipeline/pipeline.h"
+#include "scanclean/replay/recording_source.h"
+
+namespace scanclean::app {
+
+// Defined in cmd_replay.cpp.
+std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd);
+int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
+                  const std::filesystem::path& output);
+
+namespace {
+
+struct CaptureCommandOptions {
+  std::string source = "openni2://";
+  std::string output;
+  std::string record;
+  std::uint64_t frames = 0;
+  double seconds = 0;
+  int reconnect = 0;
+  bool depth_100um = false;
+};
+
+int run_capture(const CaptureCommandOptions& c,
+                const std::function<void(PipelineOptions&)>& apply) {
+  PipelineOptions o;
+  apply(o);
+  o.last_frame = c.frames;
+  o.max_seconds = c.seconds;
+  o.reconnect_attempts = c.reconnect;
+  SourceOptions so;
+  so.depth_100um = c.depth_100um;
+  std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
+  if (!c.record.empty()) source = make_recording_source(std::move(source), c.record);
+  const int rc = run_clean_job("capture", *source, o, c.output);
+  source.reset();  // finishes the recording folder (if any)
+  if (!c.record.empty())
+    std::fprintf(stderr, "scanclean capture: raw frames recorded in %s\n", c.record.c_str());
+  return rc;
+}
+
+const CommandRegistrar kRegistrar{{
+    "capture",
+    "Live capture-and-clean: frames from a sensor (or any source) -> robust filter -> PLY",
+    42,
+    [](CLI::App& cmd) {
+      auto c = std::make_shared<CaptureCommandOptions>();
+      cmd.add_option("--source", c->source,
+                     "Source URI: openni2:// (first sensor, default), openni2://<device uri>, "
+                     "vsensor://<folder>, or any path `scanclean replay` accepts")
+          ->default_val("openni2://");
+      cmd.add_option("-o,--output", c->output, "Output point cloud (.ply .pcd .xyz, metres)")
+          ->required();
+      cmd.add_option("--record", c->record,
+                     "Also record the raw frames to this recording folder (format v1, crash-safe; "
+                     "replay it later with scanclean replay)");
+      auto* f =
+          cmd.add_option("--frames", c->frames, "Stop after N frames")->check(CLI::PositiveNumber);
+      auto* s = cmd.add_option("--seconds", c->seconds, "Stop after S seconds")
+                    ->check(CLI::PositiveNumber);
+      (void)f;
+      (void)s;
+      cmd.add_option("--reconnect", c->reconnect,
+                     "After a disconnect, try to reopen the device up to this many times "
+                     "(default 0: stop cleanly, keeping what was captured)")
+          ->default_val(0);
+      cmd.add_flag("--depth-100um", c->depth_100um, "Live sensors: 0.1 mm depth units");
+      cmd.footer(
+          "Stops at the end of a finite source, after --frames/--seconds, on a disconnect, or on "
+          "Ctrl-C (exit 130; what was captured is filtered and written). With no sensor: "
+          "\"no depth sensor found; run scanclean devices\", exit 5.\n"
+          "Exit codes: 0 ok, 1 internal error, 2 bad command line or option, 3 bad input data,\n"
+          "4 file I/O failure, 5 device/driver/feature unavailable, 130 interrupted.");
+      auto apply = add_clean_options(cmd);
+      return [c, apply] { return run_capture(*c, apply); };
+    },
+}};
+
+}  // namespace
+}  // namespace scanclean::app
+
+#endif
