@@ -143,8 +143,10 @@ int run_filter(const FilterCommandOptions& c) {
   sum.add("scale", std::string(mode));
   sum.add("h", s.h * 1000.0, 3, "mm");
   if (o.scale == ScaleMode::kAdaptive) {
-    sum.add("h range",
-            std::to_string(s.h_min * 1000.0) + " .. " + std::to_string(s.h_max * 1000.0) + " mm");
+    char range[96];
+    std::snprintf(range, sizeof range, "%.3f .. %.3f mm (median shown as h)", s.h_min * 1000.0,
+                  s.h_max * 1000.0);
+    sum.add("h range", range);
   }
   if (o.scale == ScaleMode::kAuto)
     sum.add("noise sigma (estimate)", s.noise_sigma * 1000.0, 3, "mm");
