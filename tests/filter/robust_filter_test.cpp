@@ -97,8 +97,8 @@ TEST(RobustFilterTest, NoisySphereKeepsItsRadius) {
 }
 
 TEST(RobustFilterTest, DeterministicForAnyThreadCount) {
-  PointCloud c = test::noisy_sphere(15000, 1.0, 0.01, 4);  // seed 4
-  test::add_uniform_outliers(c, 500, -1.5, 1.5, 5);        // seed 5
+  PointCloud c = test::noisy_sphere(8000, 1.0, 0.01, 4);  // seed 4
+  test::add_uniform_outliers(c, 300, -1.5, 1.5, 5);       // seed 5
   FilterOptions o;
   o.threads = 1;
   const FilterResult a = robust_filter(c, o);
@@ -366,7 +366,7 @@ TEST(RobustFilterTest, VectorUpdateAlsoConvergesOnThePlane) {
 }
 
 TEST(RobustFilterTest, ClusteringMergesAndCountsMembers) {
-  PointCloud c = test::noisy_plane(10000, 1.0, 0.002, 17);  // seed 17
+  PointCloud c = test::noisy_plane(6000, 1.0, 0.002, 17);  // seed 17
   c.normals.clear();
   FilterOptions o;
   o.merge_eps = -1;  // default 0.25 s
@@ -387,7 +387,7 @@ TEST(RobustFilterTest, ClusteringMergesAndCountsMembers) {
 }
 
 TEST(RobustFilterTest, SecondPassKeepsAccountingAndSmoothsFurther) {
-  PointCloud c = test::noisy_plane(10000, 1.0, 0.004, 18);  // seed 18
+  PointCloud c = test::noisy_plane(6000, 1.0, 0.004, 18);  // seed 18
   c.normals.clear();
   FilterOptions o = no_merge();
   const FilterResult one = robust_filter(c, o);
@@ -399,22 +399,22 @@ TEST(RobustFilterTest, SecondPassKeepsAccountingAndSmoothsFurther) {
 }
 
 TEST(RobustFilterTest, SmallComponentsAreRemovedOnRequest) {
-  PointCloud c = test::noisy_plane(20000, 1.0, 0.001, 19);  // seed 19
+  PointCloud c = test::noisy_plane(10000, 1.0, 0.001, 19);  // seed 19
   c.normals.clear();
-  // A tight clump of 12 points far from the plane: dense enough for its own kernels and for
-  // the density test, but a component smaller than max(k_min, 1e-3 N) = 20.
+  // A tight clump of 9 points far from the plane: dense enough for its own kernels (k_min 8)
+  // and for the density test, but a component smaller than max(k_min, 1e-3 N) = 10.
   std::mt19937 rng(20);  // seed 20
   std::normal_distribution<double> g(0.0, 0.002);
-  for (int i = 0; i < 12; ++i) c.positions.emplace_back(g(rng), g(rng), 0.4 + 0.0001 * g(rng));
+  for (int i = 0; i < 9; ++i) c.positions.emplace_back(g(rng), g(rng), 0.4 + 0.0001 * g(rng));
   FilterOptions o = no_merge();
   const FilterResult keep = robust_filter(c, o);
   std::size_t clump_kept = 0;
   for (const auto& p : keep.cloud.positions) clump_kept += p.z() > 0.3 ? 1 : 0;
-  EXPECT_EQ(clump_kept, 12u);
+  EXPECT_EQ(clump_kept, 9u);
   o.remove_small_components = true;
   const FilterResult drop = robust_filter(c, o);
   for (const auto& p : drop.cloud.positions) EXPECT_LT(p.z(), 0.3);
-  EXPECT_EQ(drop.stats.small_components, 12u);
+  EXPECT_EQ(drop.stats.small_components, 9u);
   expect_accounting(c, drop);
 }
 
