@@ -60,10 +60,13 @@ std::unique_ptr<RangeSource> make_openni2_source(const std::string& uri,
 //! recorder ~100 ms before the stream so the first frames are kept. Stops after `max_frames`
 //! frames (0 = no limit), `max_seconds` seconds (<= 0 = no limit), when keep_going() returns
 //! false (may be empty), or when the device ends/disconnects. Returns the number of frames
-//! written. The .oni is written in place by OpenNI (not atomically); a killed recording is not
-//! guaranteed to be readable: use the recording folder format (replay module) for crash-safe
-//! capture. \throw UnavailableError, OptionError (max_frames == 0 and max_seconds <= 0 and no
-//! keep_going), IoError (the file cannot be created).
+//! written. The .oni is written in place by OpenNI (not atomically). Measured with Debian's
+//! libOniFile: a recorder killed with SIGKILL leaves a file without a frame count that still
+//! plays back, bit-exact, up to its last written frame (make_openni2_source then reports an
+//! unknown frame_count); the recording folder format (replay module) remains the crash-safe
+//! capture path with a documented guarantee. \throw UnavailableError, OptionError (max_frames ==
+//! 0 and max_seconds <= 0 and no keep_going, or a URI that is not openni2:// or vsensor://),
+//! IoError (the file cannot be created; checked before OpenNI touches it).
 std::size_t record_oni(const std::string& device_uri, const std::filesystem::path& out_oni,
                        std::size_t max_frames, double max_seconds,
                        const std::function<bool()>& keep_going);
