@@ -304,6 +304,29 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
                            std::to_string(h.point_step) +
                            " bytes = " + std::to_string(n * h.point_step) + " bytes expected, " +
                            std::to_string(remaining) + " present (truncated file?)");
+  } else if (h.data == "binary_compressed") {
+    const auto* base = reinterpret_cast<const unsigned char*>(bytes.data()) + h.data_offset;
+    if (remaining < 8)
+      throw InputError(file, byte_place(h.data_offset),
+                       "binary_compressed data must start with two uint32 sizes; only " +
+                           std::to_string(remaining) + " bytes present");
+    std::uint32_t csize, usize;
+    std::memcpy(&csize, base, 4);
+    std::memcpy(&usize, base + 4, 4);
+    if (csize > remaining - 8)
+      throw InputError(file, byte_place(h.data_offset),
+                       "compressed size " + std::to_string(csize) + " exceeds the " +
+                           std::to_string(remaining - 8) + " bytes left in the file");
+    if (usize != n * h.point_step)
+      throw InputError(file, byte_place(h.data_offset + 4),
+                       "uncompressed size " + std::to_string(usize) +
+                           " differs from POINTS x point size = " + std::to_string(n) + " x " +
+                           std::to_string(h.point_step) + " = " + std::to_string(n * h.point_step));
+    // LZF expands at most ~88x (264-byte matches in 3-byte codes): reject lying sizes early.
+    if (static_cast<std::uint64_t>(usize) > 100ull * csize + 1024)
+      throw InputError(file, byte_place(h.data_offset),
+                       "uncompressed size " + std::to_string(usize) + " cannot come from a " +
+                           std::to_string(csize) + "-byte LZF payload (header or sizes corrupt)");
   }
   for (auto& c : columns) c.values.reserve(n);
   std::vector<std::uint32_t> colours;
@@ -385,28 +408,9 @@ PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report) {
     std::vector<unsigned char> decompressed;
     bool soa = false;
     if (h.data == "binary_compressed") {
-      if (remaining < 8)
-        throw InputError(file, byte_place(h.data_offset),
-                         "binary_compressed data must start with two uint32 sizes; only " +
-                             std::to_string(remaining) + " bytes present");
       std::uint32_t csize, usize;
       std::memcpy(&csize, base, 4);
       std::memcpy(&usize, base + 4, 4);
-      if (csize > remaining - 8)
-        throw InputError(file, byte_place(h.data_offset),
-                         "compressed size " + std::to_string(csize) + " exceeds the " +
-                             std::to_string(remaining - 8) + " bytes left in the file");
-      if (usize != n * h.point_step)
-        throw InputError(file, byte_place(h.data_offset + 4),
-                         "uncompressed size " + std::to_string(usize) +
-                             " differs from POINTS x point size = " + std::to_string(n) + " x " +
-                             std::to_string(h.point_step) + " = " +
-                             std::to_string(n * h.point_step));
-      // LZF expands at most ~88x (264-byte matches in 3-byte codes): reject lying sizes early.
-      if (static_cast<std::uint64_t>(usize) > 100ull * csize + 1024)
-        throw InputError(file, byte_place(h.data_offset),
-                         "uncompressed size " + std::to_string(usize) + " cannot come from a " +
-                             std::to_string(csize) + "-byte LZF payload (header or sizes corrupt)");
       if (usize > 0) {
         decompressed.resize(usize);
         const unsigned got = lzf_decompress(base + 8, csize, decompressed.data(), usize);

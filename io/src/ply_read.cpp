@@ -464,6 +464,15 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
         file, line_place(vertex->header_line),
         "too many vertices (" + std::to_string(vertex->count) + "); at most 2^31-1 are supported");
   const std::size_t n = static_cast<std::size_t>(vertex->count);
+  for (const char* axis : {"x", "y", "z"}) {
+    const bool found =
+        std::any_of(vertex->properties.begin(), vertex->properties.end(),
+                    [axis](const Property& p) { return !p.is_list && p.name == axis; });
+    if (!found)
+      throw InputError(
+          file, line_place(vertex->header_line),
+          std::string("element vertex has no scalar property ") + axis + "; expected x, y and z");
+  }
 
   if (report) {
     report->format = "ply";
