@@ -98,6 +98,25 @@ TEST(SlRealCaptureTest, FastDecoderEqualsOpenCV) {
   EXPECT_EQ(fast1.column.data, fast.column.data);
 }
 
+TEST(SlRealCaptureTest, PatternsEqualTheShippedProjectorImages) {
+  SCANCLEAN_REQUIRE_SHARED("structured_light_kamino410/graycode_pattern/pattern_41.png");
+  const auto dir = test::make_temp_dir("sl_real_patterns");
+  ASSERT_EQ(write_graycode_patterns(dir, 1024, 768), 42);
+  int differ = 0;
+  for (int k = 0; k < 42; ++k) {
+    char ours[32], theirs[64];
+    std::snprintf(ours, sizeof ours, "%03d.png", k);
+    std::snprintf(theirs, sizeof theirs, "pattern_%02d.png", k);
+    const cv::Mat a = cv::imread((dir / "patterns" / ours).string(), cv::IMREAD_UNCHANGED);
+    const cv::Mat b = cv::imread(
+        (test::shared_data_dir() / "structured_light_kamino410/graycode_pattern" / theirs).string(),
+        cv::IMREAD_GRAYSCALE);
+    ASSERT_EQ(a.size(), b.size()) << ours;
+    differ += cv::countNonZero(a != b);
+  }
+  EXPECT_EQ(differ, 0);
+}
+
 // Board points (valid pixels inside the chessboard's inner-corner hull), metres.
 std::vector<Eigen::Vector3d> board_points(const Real& x, cv::Rect roi, std::vector<float>* conf) {
   std::vector<Eigen::Vector3d> pts;
