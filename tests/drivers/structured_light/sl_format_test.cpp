@@ -192,6 +192,65 @@ TEST(SlFormatTest, NoCalibrationIsNamed) {
                      {"sl_empty", "no structured-light capture"});
 }
 
+// Hand-made intensities: Gray -> binary, ties (I == I_inverse reads 0, as OpenCV), the margin
+// and contrast rules, and out-of-range codes, for both decoders.
+TEST(SlFormatTest, HandMadePixelsDecodeAsSpecified) {
+  SlCaptureInfo info;
+  info.graycode = graycode_layout(3, 2);  // 2 column bits, 1 row bit; code 3 is out of range
+  info.white_index = 6;
+  info.black_index = 7;
+  // Per pixel: column Gray bits (MSB first), row bit; '+' lit, '-' inverse lit, '=' tie.
+  const std::vector<std::string> codes = {"++-", "===", "+--", "-+-", "-++", "++-"};
+  const std::vector<int> black = {10, 10, 10, 10, 10, 80};
+  std::vector<Image<std::uint8_t>> images(8, Image<std::uint8_t>(6, 1));
+  for (int x = 0; x < 6; ++x) {
+    for (int b = 0; b < 3; ++b) {
+      const char ch = codes[static_cast<std::size_t>(x)][static_cast<std::size_t>(b)];
+      const std::uint8_t hi = 200, lo = static_cast<std::uint8_t>(x == 3 ? 197 : 20);
+      images[static_cast<std::size_t>(2 * b)](x, 0) = ch == '-' ? lo : (ch == '=' ? 100 : hi);
+      images[static_cast<std::size_t>(2 * b + 1)](x, 0) = ch == '+' ? lo : (ch == '=' ? 100 : hi);
+    }
+    images[6](x, 0) = 210;
+    images[7](x, 0) = static_cast<std::uint8_t>(black[static_cast<std::size_t>(x)]);
+  }
+  const SlCapture cap = SlCapture::from_images(info, images);
+  for (SlDecoder decoder : {SlDecoder::kFast, SlDecoder::kOpenCV}) {
+    SlDecodeOptions o;
+    o.decoder = decoder;
+    o.white_threshold = 5;
+    o.black_threshold = 150;
+    const SlDecoded d = decode_graycode(cap, o);
+    SCOPED_TRACE(to_string(decoder));
+    // x=0: Gray 11 -> binary 10 = column 2, row 0.
+    EXPECT_EQ(d.status(0, 0), 0);
+    EXPECT_EQ(d.column(0, 0), 2);
+    EXPECT_EQ(d.row(0, 0), 0);
+    EXPECT_FLOAT_EQ(d.confidence(0, 0), 180.0f / 200.0f);
+    EXPECT_EQ(d.status(1, 0), static_cast<std::uint8_t>(SlPixelStatus::kWeakBit));  // ties
+    EXPECT_EQ(d.column(1, 0), -1);
+    EXPECT_EQ(d.confidence(1, 0), 0.0f);
+    EXPECT_EQ(d.status(2, 0), static_cast<std::uint8_t>(SlPixelStatus::kOutOfRange));  // 3 >= 3
+    EXPECT_EQ(d.status(3, 0), static_cast<std::uint8_t>(SlPixelStatus::kWeakBit));     // margin 3
+    EXPECT_EQ(d.status(4, 0), 0);  // Gray 01 -> binary 01 = column 1; row 1
+    EXPECT_EQ(d.column(4, 0), 1);
+    EXPECT_EQ(d.row(4, 0), 1);
+    EXPECT_EQ(d.status(5, 0), static_cast<std::uint8_t>(SlPixelStatus::kShadow));  // 130 <= 150
+    EXPECT_EQ(d.lit, 5u);
+  }
+  // With white threshold 0 a tie is a readable 0 bit: column 0, row 0, confidence 0.
+  for (SlDecoder decoder : {SlDecoder::kFast, SlDecoder::kOpenCV}) {
+    SlDecodeOptions o;
+    o.decoder = decoder;
+    o.white_threshold = 0;
+    o.black_threshold = 150;
+    const SlDecoded d = decode_graycode(cap, o);
+    EXPECT_EQ(d.status(1, 0), 0) << to_string(decoder);
+    EXPECT_EQ(d.column(1, 0), 0);
+    EXPECT_EQ(d.row(1, 0), 0);
+    EXPECT_EQ(d.confidence(1, 0), 0.0f);
+  }
+}
+
 TEST(SlFormatTest, Kamino410LayoutGivesTheSameFrame) {
   const fs::path folder = write_small("sl_kamino_ref");
   const SlResult ref = process_sl_capture(folder);
