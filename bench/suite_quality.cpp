@@ -55,6 +55,16 @@ std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool 
   return m;
 }
 
+// A fixed row order per method name (the method list differs between sizes: WLOP is optional).
+int method_order(const std::string& name) {
+  static const char* const kOrder[] = {"noisy input",     "scanclean robust_filter",
+                                       "CGAL jet_smooth", "CGAL bilateral_smooth",
+                                       "CGAL wlop",       "PCA-plane projection"};
+  for (int i = 0; i < 6; ++i)
+    if (name == kOrder[i]) return i;
+  return 6;
+}
+
 struct Accum {
   double cd = 0, p2m = 0, mean = 0, p95 = 0, cov = 0, secs = 0;
   int count = 0;
@@ -121,7 +131,7 @@ void run_quality_suite(Context& ctx) {
           const auto t0 = std::chrono::steady_clock::now();
           Points out = methods[mi].run(inst.input);
           const double secs = seconds_since(t0);
-          add_row(static_cast<int>(mi) + 1, methods[mi].name, evaluate(gt, out), secs);
+          add_row(method_order(methods[mi].name), methods[mi].name, evaluate(gt, out), secs);
         }
       }
     }
