@@ -90,7 +90,7 @@ std::vector<Eigen::Vector3d> rays_for(const SlCalibration& calib,
   cv::Mat D = (cv::Mat_<double>(1, 5) << K.dist[0], K.dist[1], K.dist[2], K.dist[3], K.dist[4]);
   std::vector<cv::Point2d> norm;
   cv::undistortPoints(pixels, norm, Km, D, cv::noArray(), cv::noArray(),
-                      cv::TermCriteria(cv::TermCriteria::COUNT, 50, 0));
+                      cv::TermCriteria(cv::TermCriteria::COUNT, 10, 0));
   std::vector<Eigen::Vector3d> rays(norm.size());
   for (std::size_t i = 0; i < norm.size(); ++i) rays[i] = {norm[i].x, norm[i].y, 1.0};
   return rays;

@@ -27,7 +27,7 @@ struct SlScene {
   double blur_sigma_px = 0.6;
   double noise_sigma = 2.0;
   std::uint64_t seed = 7;
-  int supersample = 2;  // per axis
+  int supersample = 2;  // per axis: pixel-area integration
 };
 
 //! Per camera pixel truth (at the pixel centre).
