@@ -70,9 +70,9 @@ const CommandRegistrar kRegistrar{{
                      "Also record the raw frames to this recording folder (format v1, crash-safe; "
                      "replay it later with scanclean replay)");
       auto* f =
-          cmd.add_option("--frames", c->frames, "Stop after N frames")->check(CLI::PositiveNumber);
-      auto* s = cmd.add_option("--seconds", c->seconds, "Stop after S seconds")
-                    ->check(CLI::PositiveNumber);
+          cmd.add_option("--frames", c->frames, "Stop after N frames")->check(positive_number());
+      auto* s =
+          cmd.add_option("--seconds", c->seconds, "Stop after S seconds")->check(positive_number());
       (void)f;
       (void)s;
       cmd.add_option("--reconnect", c->reconnect,

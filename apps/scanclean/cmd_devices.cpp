@@ -174,7 +174,7 @@ const CommandRegistrar kRegistrar{
        cmd.add_option("--watch", o->watch_seconds,
                       "Keep watching for this many seconds and report USB devices arriving and "
                       "leaving (hotplug where supported, else polling every 0.5 s)")
-           ->check(CLI::NonNegativeNumber);
+           ->check(non_negative_number());
        cmd.add_flag("--all", o->all_usb, "List every USB device, not only known depth sensors");
        cmd.footer(
            "Known sensors: PrimeSense Carmine / Asus Xtion (1d27:0600/0601/0609/0500, usable "

@@ -189,7 +189,7 @@ const CommandRegistrar kRegistrar{{
       auto* h = cmd.add_option("--h", c->h,
                                "Fixed kernel size h in metres (the paper uses 1-10x the mean "
                                "point spacing)")
-                    ->check(CLI::PositiveNumber);
+                    ->check(positive_number());
       auto* k = cmd.add_option("--k", c->k,
                                "Adaptive kernels: h_i = distance to the k-th nearest neighbour "
                                "(the paper uses 250 on raw overlapping scans)")

@@ -149,9 +149,9 @@ const CommandRegistrar kRegistrar{{
                      "path (recording folder, depth images, .oni, structured-light capture)")
           ->required();
       auto* f =
-          cmd.add_option("--frames", c->frames, "Stop after N frames")->check(CLI::PositiveNumber);
-      auto* s = cmd.add_option("--seconds", c->seconds, "Stop after S seconds")
-                    ->check(CLI::PositiveNumber);
+          cmd.add_option("--frames", c->frames, "Stop after N frames")->check(positive_number());
+      auto* s =
+          cmd.add_option("--seconds", c->seconds, "Stop after S seconds")->check(positive_number());
       (void)f;
       (void)s;
       cmd.add_option("output", c->output,

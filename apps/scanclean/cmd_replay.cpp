@@ -66,12 +66,12 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
                  "Frames per output cloud: each window of N frames is filtered into one cloud "
                  "(OUT_0000.ply, OUT_0001.ply, ... when there are several); 0 = all frames into "
                  "one (default)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   cmd.add_flag("--raw", v->raw,
                "Skip the robust filter: write the back-projected points (with sensor normals and "
                "confidences)");
   cmd.add_option("--h", v->h, "Fixed filter kernel size h (metres); default automatic")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   cmd.add_option("--k", v->k, "Adaptive kernels: h_i = distance to the k-th neighbour")
       ->check(CLI::Range(2, 1000));
   cmd.add_option("--k-h", v->k_h, "Neighbour rank of the automatic h")->default_val(48);

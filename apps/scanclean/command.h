@@ -27,6 +27,11 @@ struct Command {
 
 std::vector<Command>& command_registry();
 
+//! Option checks with readable messages ("expected a number > 0, got -1"), replacing CLI11's
+//! PositiveNumber / NonNegativeNumber, whose message prints the double range in full.
+const CLI::Validator& positive_number();
+const CLI::Validator& non_negative_number();
+
 struct CommandRegistrar {
   explicit CommandRegistrar(Command c) { command_registry().push_back(std::move(c)); }
 };
