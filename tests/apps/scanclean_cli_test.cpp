@@ -1,0 +1,228 @@
+// The scanclean program end to end, as a script drives it: every run is a child process, its exit
+// code is checked against the documented table (0 ok, 2 bad option, 3 bad input data, 4 file I/O
+// failure, 5 device unavailable) and its output files are read back.
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "scanclean/io/point_cloud_io.h"
+#include "support/data_paths.h"
+#include "support/synthetic.h"
+
+namespace fs = std::filesystem;
+
+namespace scanclean {
+namespace {
+
+struct ProgramRun {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+std::string quoted(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string slurp(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+//! Runs the program with `args` (no shell expansion of the arguments), stdin from /dev/null.
+ProgramRun run(const std::vector<std::string>& args, const fs::path& dir) {
+  std::string command = quoted(SCANCLEAN_PROGRAM);
+  for (const auto& a : args) command += " " + quoted(a);
+  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+  command += " </dev/null >" + quoted(out.string()) + " 2>" + quoted(err.string());
+  const int status = std::system(command.c_str());
+  ProgramRun r;
+  if (status != -1 && WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+double rms_z(const PointCloud& cloud) {
+  double sum = 0;
+  for (const auto& p : cloud.positions) sum += p.z() * p.z();
+  return cloud.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(cloud.size()));
+}
+
+TEST(ScancleanCliTest, HelpListsTheSubcommandsAndExitCodes) {
+  const auto dir = test::make_temp_dir("cli");
+  const ProgramRun r = run({"--help"}, dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  for (const char* word :
+       {"info", "convert", "filter", "replay", "capture", "record", "devices", "sl", "Exit codes"})
+    EXPECT_TRUE(contains(r.out, word)) << "--help does not mention " << word << ":\n" << r.out;
+  const ProgramRun sub = run({"filter", "--help"}, dir);
+  EXPECT_EQ(sub.exit_code, 0);
+  EXPECT_TRUE(contains(sub.out, "--merge-eps")) << sub.out;
+}
+
+TEST(ScancleanCliTest, BadCommandLinesExitTwoWithTheReason) {
+  const auto dir = test::make_temp_dir("cli");
+  const ProgramRun none = run({}, dir);
+  EXPECT_EQ(none.exit_code, 2);
+  const ProgramRun unknown = run({"frobnicate"}, dir);
+  EXPECT_EQ(unknown.exit_code, 2);
+  const ProgramRun no_output = run({"filter", "in.ply"}, dir);
+  EXPECT_EQ(no_output.exit_code, 2);
+  EXPECT_TRUE(contains(no_output.err, "--output")) << no_output.err;
+  const ProgramRun negative =
+      run({"filter", "in.ply", "-o", (dir / "o.ply").string(), "--h", "-1"}, dir);
+  EXPECT_EQ(negative.exit_code, 2);
+  EXPECT_TRUE(contains(negative.err, "expected a number > 0, got -1")) << negative.err;
+  EXPECT_FALSE(fs::exists(dir / "o.ply"));
+}
+
+TEST(ScancleanCliTest, MissingFileExitsFourNamingIt) {
+  const auto dir = test::make_temp_dir("cli");
+  const fs::path missing = dir / "no_such_scan.ply";
+  const ProgramRun r = run({"info", missing.string()}, dir);
+  EXPECT_EQ(r.exit_code, 4) << r.err;
+  EXPECT_TRUE(contains(r.err, missing.string())) << r.err;
+}
+
+TEST(ScancleanCliTest, MalformedFileExitsThreeNamingFileAndPlace) {
+  const auto dir = test::make_temp_dir("cli");
+  const fs::path bad = dir / "truncated.ply";
+  std::ofstream(bad) << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                        "property float y\nproperty float z\nend_header\n1 2 3\n4 5\n";
+  const ProgramRun r = run({"info", bad.string()}, dir);
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_TRUE(contains(r.err, bad.string())) << r.err;
+  EXPECT_TRUE(contains(r.err, "line")) << r.err;
+  // The same file as filter input: the same exit code, and no output appears.
+  const ProgramRun f = run({"filter", bad.string(), "-o", (dir / "out.ply").string()}, dir);
+  EXPECT_EQ(f.exit_code, 3) << f.err;
+  EXPECT_FALSE(fs::exists(dir / "out.ply"));
+}
+
+TEST(ScancleanCliTest, ConvertRoundTripKeepsEveryPointAndNormal) {
+  const auto dir = test::make_temp_dir("cli");
+  const PointCloud cloud = test::noisy_sphere(500, 0.2, 0.001, 11);
+  write_point_cloud(dir / "in.ply", cloud);
+  ASSERT_EQ(run({"convert", (dir / "in.ply").string(), (dir / "mid.pcd").string()}, dir).exit_code,
+            0);
+  const ProgramRun back =
+      run({"convert", (dir / "mid.pcd").string(), (dir / "back.xyz").string()}, dir);
+  ASSERT_EQ(back.exit_code, 0) << back.err;
+  const PointCloud read = read_point_cloud(dir / "back.xyz");
+  ASSERT_EQ(read.size(), cloud.size());
+  ASSERT_TRUE(read.has_normals());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    EXPECT_LT((read.positions[i] - cloud.positions[i]).norm(), 1e-6) << i;
+    EXPECT_LT((read.normals[i] - cloud.normals[i]).norm(), 1e-5) << i;
+  }
+}
+
+#ifdef SCANCLEAN_HAVE_FILTER
+TEST(ScancleanCliTest, FilterSmoothsAPlaneAndAccountsForEveryPoint) {
+  const auto dir = test::make_temp_dir("cli");
+  PointCloud cloud = test::noisy_plane(4000, 1.0, 0.004, 21);
+  cloud.normals.clear();
+  const auto outliers = test::add_uniform_outliers(cloud, 40, -0.5, 0.5, 22);
+  (void)outliers;
+  write_point_cloud(dir / "in.ply", cloud);
+  const fs::path out = dir / "clean.ply", removed = dir / "removed.ply";
+  const ProgramRun r = run({"filter", (dir / "in.ply").string(), "-o", out.string(), "--merge-eps",
+                            "0", "--outliers", removed.string(), "--threads", "2"},
+                           dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "points in")) << r.out;
+  const PointCloud clean = read_point_cloud(out);
+  const PointCloud dropped = read_point_cloud(removed);
+  // Nothing lost silently: without merging, kept + removed = input.
+  EXPECT_EQ(clean.size() + dropped.size(), cloud.size());
+  EXPECT_GE(dropped.size(), 30u);  // most of the 40 box outliers (some land on the plane)
+  EXPECT_LE(dropped.size(), 80u);
+  // The kept plane points lie much closer to z = 0 than the input's noise (sigma 0.004).
+  const auto* source = clean.find_attribute("source_index");
+  ASSERT_NE(source, nullptr);
+  std::vector<std::size_t> plane_points;
+  for (std::size_t i = 0; i < clean.size(); ++i)
+    if (source->values[i] < 4000) plane_points.push_back(i);
+  EXPECT_GT(plane_points.size(), 3960u);
+  const double rms = rms_z(select(clean, plane_points));
+  EXPECT_LT(rms, 0.004 / 3) << "filtered RMS " << rms;
+  // No stray temporary files beside the outputs.
+  for (const auto& entry : fs::directory_iterator(dir))
+    EXPECT_FALSE(contains(entry.path().filename().string(), ".tmp")) << entry.path();
+}
+
+TEST(ScancleanCliTest, UnwritableOutputExitsFourAndLeavesNoFile) {
+  const auto dir = test::make_temp_dir("cli");
+  write_point_cloud(dir / "in.ply", test::noisy_plane(300, 1.0, 0.001, 5));
+  const fs::path out = dir / "no_such_folder" / "out.ply";
+  const ProgramRun r = run({"filter", (dir / "in.ply").string(), "-o", out.string()}, dir);
+  EXPECT_EQ(r.exit_code, 4) << r.err;
+  EXPECT_TRUE(contains(r.err, "no_such_folder")) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+}
+#endif
+
+#ifdef SCANCLEAN_HAVE_OPENNI2
+TEST(ScancleanCliTest, CaptureWithoutASensorExitsFiveAndSaysWhatToDo) {
+  const auto dir = test::make_temp_dir("cli");
+  const ProgramRun r = run({"capture", "-o", (dir / "live.ply").string()}, dir);
+  EXPECT_EQ(r.exit_code, 5) << r.err;
+  EXPECT_TRUE(contains(r.err, "no depth sensor found; run scanclean devices")) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "live.ply"));
+}
+
+TEST(ScancleanCliTest, ReplayOfTheBundledRecordingWritesAnOrganizedRawFrame) {
+  const auto dir = test::make_temp_dir("cli");
+  const fs::path oni = test::recordings_dir() / "oni" / "3dj_test.oni";
+  const fs::path out = dir / "frame.ply";
+  const ProgramRun r =
+      run({"replay", oni.string(), "--frames", "0:1", "--raw", "-o", out.string()}, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const PointCloud cloud = read_point_cloud(out);
+  EXPECT_GT(cloud.size(), 150000u);  // a 640x480 PrimeSense frame of a room: ~210k valid pixels
+  EXPECT_LT(cloud.size(), 640u * 480u);
+  EXPECT_TRUE(cloud.has_normals());
+  EXPECT_TRUE(cloud.has_confidences());
+  for (const auto& p : cloud.positions) {
+    ASSERT_GT(p.z(), 0.3);  // metres, in front of the camera, within the PS1080's range
+    ASSERT_LT(p.z(), 10.5);
+  }
+}
+#endif
+
+#ifdef SCANCLEAN_HAVE_SL
+TEST(ScancleanCliTest, SlPatternsWritesTheWholeSequence) {
+  const auto dir = test::make_temp_dir("cli");
+  const ProgramRun r =
+      run({"sl", "patterns", "--projector", "64x32", "-o", (dir / "rig").string()}, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "rig" / "capture.json"));
+  std::size_t images = 0;
+  for (const auto& entry : fs::directory_iterator(dir / "rig" / "patterns"))
+    images += entry.path().extension() == ".png";
+  EXPECT_EQ(images, 2u * (6 + 5) + 2);  // 6 column + 5 row bits with inverses, white, black
+  const ProgramRun bad =
+      run({"sl", "patterns", "--projector", "64by32", "-o", (dir / "x").string()}, dir);
+  EXPECT_EQ(bad.exit_code, 2) << bad.err;
+}
+#endif
+
+}  // namespace
+}  // namespace scanclean
