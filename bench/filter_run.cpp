@@ -70,6 +70,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   run.p95_iterations = s.p95_iterations;
   run.unsupported = s.unsupported;
   run.low_density = s.low_density;
+  run.low_likelihood = s.low_likelihood;
   run.small_components = s.small_components;
   run.merged = s.merged;
   run.not_converged = s.not_converged;

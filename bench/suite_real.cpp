@@ -86,7 +86,8 @@ void run_real_suite(Context& ctx) {
                     " mm, estimated noise sigma = " + fmt(run.noise_sigma * 1e3, 3) + " mm.");
   t.notes.push_back("Input points removed as outliers: " + fmt_count(merged.size() - kept_inputs) +
                     " (unsupported " + fmt_count(run.unsupported) + ", low density " +
-                    fmt_count(run.low_density) + ", small components " +
+                    fmt_count(run.low_density) + ", low likelihood " +
+                    fmt_count(run.low_likelihood) + ", small components " +
                     fmt_count(run.small_components) +
                     "); merged into other output points: " + fmt_count(run.merged) + ".");
   for (const auto& w : report.warnings) t.notes.push_back("reader: " + w);
