@@ -19,10 +19,11 @@ constexpr const char* kExitCodes =
 
 int main(int argc, char** argv) {
   using scanclean::ExitCode;
-  CLI::App app{"scanclean: turns noisy scanner output into clean surface points.\n"
-               "Robust filter of Schall, Belyaev and Seidel (2005) with OpenNI2, recording and\n"
-               "structured-light sources. Units are metres unless stated otherwise.",
-               "scanclean"};
+  CLI::App app{
+      "scanclean: turns noisy scanner output into clean surface points.\n"
+      "Robust filter of Schall, Belyaev and Seidel (2005) with OpenNI2, recording and\n"
+      "structured-light sources. Units are metres unless stated otherwise.",
+      "scanclean"};
   app.footer(kExitCodes);
   app.require_subcommand(1);
   app.set_version_flag("--version", "scanclean 0.1.0");

@@ -1,8 +1,8 @@
 #include "scanclean/summary.h"
 
 #include <cstdio>
-#include <sstream>
 #include <iomanip>
+#include <sstream>
 
 namespace scanclean::app {
 
@@ -34,7 +34,8 @@ void Summary::print() const {
 
 std::string with_thousands(unsigned long long value) {
   std::string s = std::to_string(value);
-  for (int i = static_cast<int>(s.size()) - 3; i > 0; i -= 3) s.insert(static_cast<std::size_t>(i), ",");
+  for (int i = static_cast<int>(s.size()) - 3; i > 0; i -= 3)
+    s.insert(static_cast<std::size_t>(i), ",");
   return s;
 }
 
