@@ -28,10 +28,12 @@ struct FilterCommandOptions {
   double h = 0;
   int k = 0;
   bool auto_scale = false;
-  int k_h = 48;
+  int k_h = FilterOptions{}.k_h;
+  double noise_factor = FilterOptions{}.noise_factor;
+  double likelihood_ratio = FilterOptions{}.likelihood_ratio;
   std::string update = "normal";
   double merge_eps = -1;
-  double tau = 0.1;
+  double tau = FilterOptions{}.tau;
   int passes = 1;
   int threads = 0;
   int k_min = 8;
@@ -83,6 +85,8 @@ int run_filter(const FilterCommandOptions& c) {
     o.scale = ScaleMode::kAuto;
   }
   o.k_h = c.k_h;
+  o.noise_factor = c.noise_factor;
+  o.likelihood_ratio = c.likelihood_ratio;
   o.k_min = c.k_min;
   o.max_iterations = c.max_iterations;
   o.update = c.update == "vector" ? UpdateMode::kVector : UpdateMode::kNormal;
@@ -131,10 +135,11 @@ int run_filter(const FilterCommandOptions& c) {
   sum.add_count("points in", s.points_in);
   sum.add_count("points out", s.points_out);
   sum.add_count("merged into others", s.merged);
-  sum.add("outliers removed", with_thousands(s.unsupported + s.low_density + s.small_components) +
-                                  " (unsupported " + with_thousands(s.unsupported) +
-                                  ", low density " + with_thousands(s.low_density) +
-                                  ", small components " + with_thousands(s.small_components) + ")");
+  sum.add("outliers removed", with_thousands(s.removed()) + " (unsupported " +
+                                  with_thousands(s.unsupported) + ", low density " +
+                                  with_thousands(s.low_density) + ", low likelihood " +
+                                  with_thousands(s.low_likelihood) + ", small components " +
+                                  with_thousands(s.small_components) + ")");
   if (!c.outliers.empty()) sum.add("outliers file", c.outliers);
   sum.add("output file", c.output);
   const char* mode = o.scale == ScaleMode::kFixed  ? "fixed"
@@ -196,11 +201,15 @@ const CommandRegistrar kRegistrar{{
                     ->check(CLI::Range(2, 1000));
       auto* a = cmd.add_flag("--auto", c->auto_scale,
                              "Automatic h (default): median distance to the K_h-th neighbour, "
-                             "raised to 3x the estimated noise");
+                             "raised to --noise-factor x the noise sigma estimated at that scale");
       h->excludes(k)->excludes(a);
       k->excludes(a);
       cmd.add_option("--k-h", c->k_h, "K_h, the neighbour rank of the automatic h")
-          ->default_val(48);
+          ->capture_default_str();
+      cmd.add_option("--noise-factor", c->noise_factor,
+                     "Automatic h: at least this many times the noise sigma (estimated at the "
+                     "scale h itself; the spec's literal rule is 3 at h0)")
+          ->capture_default_str();
       cmd.add_option("--update", c->update,
                      "Projection step: 'normal' moves along the mean normal (default), "
                      "'vector' is the paper's literal x <- x - m")
@@ -211,7 +220,12 @@ const CommandRegistrar kRegistrar{{
                      "default 0.25 x mean spacing");
       cmd.add_option("--tau", c->tau,
                      "Drop points whose density is below tau x the median density (0 = off)")
-          ->default_val(0.1);
+          ->capture_default_str();
+      cmd.add_option("--likelihood-ratio", c->likelihood_ratio,
+                     "Drop points whose likelihood is below this fraction of the median "
+                     "likelihood of the points within h (points stopped off the surface; 0 = "
+                     "off)")
+          ->capture_default_str();
       cmd.add_option("--small-components", c->small_components,
                      "Also drop connected pieces (link radius h) with fewer input points than "
                      "this; 0 = max(k_min, 0.1 % of the points)");

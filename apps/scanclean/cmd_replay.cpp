@@ -50,9 +50,11 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
     bool raw = false;
     double h = 0;
     int k = 0;
-    int k_h = 48;
+    int k_h = FilterOptions{}.k_h;
+    double noise_factor = FilterOptions{}.noise_factor;
+    double likelihood_ratio = FilterOptions{}.likelihood_ratio;
     double merge_eps = -1;
-    double tau = 0.1;
+    double tau = FilterOptions{}.tau;
     int threads = 0;
     int passes = 1;
     int stencil = 2;
@@ -60,6 +62,7 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
     double min_depth = 0, max_depth = 0;
     bool no_weights = false;
     bool no_sensor_normals = false;
+    bool no_fuse = false;
   };
   auto v = std::make_shared<Values>();
   cmd.add_option("--accumulate", v->accumulate,
@@ -67,6 +70,10 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
                  "(OUT_0000.ply, OUT_0001.ply, ... when there are several); 0 = all frames into "
                  "one (default)")
       ->check(non_negative_number());
+  cmd.add_flag("--no-fuse", v->no_fuse,
+               "Filter every sample of a window instead of fusing the window's frames per pixel "
+               "first (fusion assumes a static view, as accumulation does; it averages each "
+               "pixel's consistent samples and weights the point by their count)");
   cmd.add_flag("--raw", v->raw,
                "Skip the robust filter: write the back-projected points (with sensor normals and "
                "confidences)");
@@ -74,12 +81,18 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
       ->check(positive_number());
   cmd.add_option("--k", v->k, "Adaptive kernels: h_i = distance to the k-th neighbour")
       ->check(CLI::Range(2, 1000));
-  cmd.add_option("--k-h", v->k_h, "Neighbour rank of the automatic h")->default_val(48);
+  cmd.add_option("--k-h", v->k_h, "Neighbour rank of the automatic h")->capture_default_str();
+  cmd.add_option("--noise-factor", v->noise_factor,
+                 "Automatic h: at least this many times the estimated noise sigma")
+      ->capture_default_str();
   cmd.add_option("--merge-eps", v->merge_eps,
                  "Merge converged points closer than this (metres); 0 = keep all; default 0.25 x "
                  "mean spacing");
   cmd.add_option("--tau", v->tau, "Drop points with density < tau x median density (0 = off)")
-      ->default_val(0.1);
+      ->capture_default_str();
+  cmd.add_option("--likelihood-ratio", v->likelihood_ratio,
+                 "Drop points with likelihood < this x the median likelihood within h (0 = off)")
+      ->capture_default_str();
   cmd.add_option("--passes", v->passes, "Filter passes (1 or 2)")->default_val(1);
   cmd.add_option("--threads", v->threads,
                  "Filter threads, 0 = all cores (the result is identical for any value)")
@@ -100,6 +113,7 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
   return [v](PipelineOptions& o) {
     o.accumulate = static_cast<std::size_t>(v->accumulate);
     o.raw = v->raw;
+    o.fuse = !v->no_fuse;
     if (v->h > 0) {
       o.filter.scale = ScaleMode::kFixed;
       o.filter.h = v->h;
@@ -108,6 +122,8 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
       o.filter.k_adaptive = v->k;
     }
     o.filter.k_h = v->k_h;
+    o.filter.noise_factor = v->noise_factor;
+    o.filter.likelihood_ratio = v->likelihood_ratio;
     o.filter.merge_eps = v->merge_eps;
     o.filter.tau = v->tau;
     o.filter.passes = v->passes;
@@ -208,6 +224,10 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
                                     with_thousands(st.max_points_per_frame) + " max");
   sum.add_count("flying pixels dropped", st.edge_dropped);
   sum.add_count("points in", st.points_in);
+  if (st.points_fused > 0)
+    sum.add("fused per pixel", with_thousands(st.points_fused) + " points (" +
+                                   with_thousands(st.fusion_rejected) +
+                                   " samples off their pixel's median depth dropped)");
   sum.add_count("points out", st.points_out);
   if (!options.raw) sum.add_count("outliers removed", st.outliers);
   sum.add("filter", options.raw ? std::string("off (--raw)") : std::string("robust filter"));

@@ -18,12 +18,82 @@ PointCloud accumulate_clouds(const std::vector<PointCloud>& clouds) {
   return out;
 }
 
+std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clouds,
+                                             const FuseOptions& options, std::size_t* rejected) {
+  if (!(options.max_depth_deviation_factor > 0 && options.max_depth_deviation_factor <= 1))
+    throw OptionError("fuse: option max_depth_deviation_factor = " +
+                      std::to_string(options.max_depth_deviation_factor) +
+                      " is out of range; valid: (0, 1]");
+  if (clouds.empty() || clouds.front().grid.empty()) return std::nullopt;
+  const int rows = clouds.front().grid.rows, cols = clouds.front().grid.cols;
+  for (const auto& c : clouds)
+    if (c.grid.rows != rows || c.grid.cols != cols ||
+        c.grid.index.size() != static_cast<std::size_t>(rows) * cols)
+      return std::nullopt;
+  const std::size_t cells = static_cast<std::size_t>(rows) * cols;
+  const double frames = static_cast<double>(clouds.size());
+  PointCloud out;
+  out.grid.rows = rows;
+  out.grid.cols = cols;
+  out.grid.index.assign(cells, -1);
+  const bool normals = std::all_of(clouds.begin(), clouds.end(), [](const PointCloud& c) {
+    return c.has_normals() || c.empty();
+  });
+  std::size_t dropped = 0;
+  std::vector<std::pair<double, std::size_t>> samples;  // (z, cloud) of one pixel
+  std::vector<double> zs;
+  for (std::size_t cell = 0; cell < cells; ++cell) {
+    samples.clear();
+    for (std::size_t k = 0; k < clouds.size(); ++k) {
+      const std::int32_t i = clouds[k].grid.index[cell];
+      if (i >= 0) samples.emplace_back(clouds[k].positions[static_cast<std::size_t>(i)].z(), k);
+    }
+    if (samples.empty()) continue;
+    zs.clear();
+    for (const auto& sm : samples) zs.push_back(sm.first);
+    const auto mid = zs.begin() + static_cast<std::ptrdiff_t>(zs.size() / 2);
+    std::nth_element(zs.begin(), mid, zs.end());
+    const double z_med = *mid;
+    const double band = options.max_depth_deviation_factor * std::abs(z_med);
+    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
+    double w = 0;
+    std::size_t kept = 0;
+    for (const auto& [z, k] : samples) {
+      if (std::abs(z - z_med) > band) {
+        ++dropped;
+        continue;
+      }
+      const auto i = static_cast<std::size_t>(clouds[k].grid.index[cell]);
+      p += clouds[k].positions[i];
+      if (normals) n += clouds[k].normals[i].cast<double>();
+      w += clouds[k].has_confidences() ? static_cast<double>(clouds[k].confidences[i]) : 1.0;
+      ++kept;
+    }
+    // kept >= 1: the median sample itself is within the band.
+    out.grid.index[cell] = static_cast<std::int32_t>(out.positions.size());
+    out.positions.push_back(p / static_cast<double>(kept));
+    if (normals) {
+      const double len = n.norm();
+      out.normals.push_back(len > 1e-9 ? Eigen::Vector3f((n / len).cast<float>())
+                                       : Eigen::Vector3f::Zero());
+    }
+    out.confidences.push_back(static_cast<float>(std::clamp(w / frames, 0.0, 1.0)));
+  }
+  if (rejected) *rejected = dropped;
+  return out;
+}
+
 FilterResult accumulate_and_clean(const std::vector<RangeFrame>& frames, const SourceInfo& info,
                                   const FrameToPointsOptions& points_options,
-                                  const FilterOptions& filter_options) {
+                                  const FilterOptions& filter_options, bool fuse) {
   std::vector<PointCloud> clouds;
   clouds.reserve(frames.size());
   for (const auto& f : frames) clouds.push_back(frame_to_points(f, info, points_options));
+  if (fuse && clouds.size() > 1)
+    if (auto fused = fuse_static_clouds(clouds)) {
+      fused->grid = {};
+      return robust_filter(*fused, filter_options);
+    }
   return robust_filter(accumulate_clouds(clouds), filter_options);
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 #include <string>
 #include <thread>
 #include <utility>
@@ -80,7 +81,19 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     out.first_frame = window_first;
     out.frames = window.size();
     out.last_frame = window_first + window.size() - 1;
-    PointCloud merged = accumulate_clouds(window);
+    PointCloud merged;
+    std::optional<PointCloud> fused;
+    if (!options.raw && options.fuse && window.size() > 1) {
+      std::size_t rejected = 0;
+      fused = fuse_static_clouds(window, {}, &rejected);
+      if (fused) {
+        st.fusion_rejected += rejected;
+        st.points_fused += fused->size();
+        merged = std::move(*fused);
+        merged.grid = {};
+      }
+    }
+    if (!fused) merged = accumulate_clouds(window);
     window.clear();
     if (options.raw) {
       out.cloud = std::move(merged);
@@ -88,7 +101,7 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
       const auto t = Clock::now();
       FilterResult r = robust_filter(merged, options.filter);
       st.seconds_filter += seconds_since(t);
-      st.outliers += r.stats.unsupported + r.stats.low_density + r.stats.small_components;
+      st.outliers += r.stats.removed();
       out.cloud = std::move(r.cloud);
       out.outliers = std::move(r.outliers);
       out.filter = r.stats;

@@ -200,15 +200,15 @@ TEST(RealRecordingTest, AccumulatedCleanSurfaceHasLowerTemporalNoise) {
       "%.3f mm (%zu points)\n"
       "  same, 12 frames accumulated + robust filter: RMS %.3f mm, median %.3f mm (%zu points; "
       "%zu in -> %zu out)\n"
-      "  reduction: RMS %.2fx, median %.2fx\n"
+      "  reduction: RMS %.2fx, median %.2fx (filter h %.2f mm, noise sigma %.2f mm)\n"
       "  deviation from the per-pixel 12-frame mean depth (a staircase at this quantisation): "
       "raw RMS %.3f / median %.3f mm, cleaned RMS %.3f / median %.3f mm\n",
       W, H, t.pixels_valid_in_all, zsum / raw_n, 2.9 * (zsum / raw_n) * (zsum / raw_n),
       t.mean_std_m * 1e3, t.median_std_m * 1e3, raw_plane_rms * 1e3, raw_plane_med * 1e3,
       raw_res.size(), clean_plane_rms * 1e3, clean_plane_med * 1e3, clean_res.size(),
       r.stats.points_in, r.stats.points_out, raw_plane_rms / clean_plane_rms,
-      raw_plane_med / clean_plane_med, raw_rms * 1e3, raw_med * 1e3, clean_rms * 1e3,
-      clean_med * 1e3);
+      raw_plane_med / clean_plane_med, r.stats.h * 1e3, r.stats.noise_sigma * 1e3, raw_rms * 1e3,
+      raw_med * 1e3, clean_rms * 1e3, clean_med * 1e3);
   EXPECT_GT(raw_plane_rms, 0.001);  // the raw frames really are noisy
   EXPECT_LT(clean_plane_rms, 0.9 * raw_plane_rms);
   EXPECT_LT(clean_plane_med, 0.5 * raw_plane_med);  // measured 2.38 -> 0.99 mm

@@ -34,6 +34,10 @@ struct PipelineOptions {
   int reconnect_attempts = 0;
   std::chrono::milliseconds reconnect_delay{500};
   bool raw = false;  //!< no filter: each window's points are the output (normals, confidences)
+  //! Before filtering, fuse each window's frames per pixel (fuse_static_clouds: one static
+  //! view, as accumulation assumes): one point per pixel with the temporal mean of its
+  //! consistent samples, weighted by how many there are. false: every sample is a point.
+  bool fuse = true;
   FrameToPointsOptions points;
   FilterOptions filter;
   //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
@@ -76,9 +80,11 @@ struct PipelineStats {
   std::uint64_t disconnects = 0, reconnects = 0;
   std::uint64_t non_increasing_timestamps = 0;  //!< device timestamps that did not increase
   std::size_t windows = 0;
-  std::size_t points_in = 0;   //!< points from frame_to_points over all used frames
-  std::size_t points_out = 0;  //!< points in all outputs
-  std::size_t outliers = 0;    //!< points the filter removed (unsupported + low density + small)
+  std::size_t points_in = 0;        //!< points from frame_to_points over all used frames
+  std::size_t points_out = 0;       //!< points in all outputs
+  std::size_t outliers = 0;         //!< points the filter removed (FilterStats::removed())
+  std::size_t points_fused = 0;     //!< points the per-pixel fusion made (input to the filter)
+  std::size_t fusion_rejected = 0;  //!< samples the fusion dropped (off the pixel's median)
   std::size_t edge_dropped = 0, out_of_range = 0, no_normal = 0;
   std::size_t min_points_per_frame = 0, max_points_per_frame = 0;
   double seconds_read = 0, seconds_points = 0, seconds_filter = 0, seconds_total = 0;
