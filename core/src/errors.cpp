@@ -13,7 +13,11 @@ ExitCode exit_code_for(const std::exception& e) noexcept {
   return ExitCode::kFailure;
 }
 
-std::string byte_place(std::uint64_t offset) { return "byte " + std::to_string(offset); }
-std::string line_place(std::uint64_t line) { return "line " + std::to_string(line); }
+std::string byte_place(std::uint64_t offset) {
+  return "byte " + std::to_string(offset);
+}
+std::string line_place(std::uint64_t line) {
+  return "line " + std::to_string(line);
+}
 
 }  // namespace scanclean

@@ -13,10 +13,14 @@ bool Progress::enabled() {
 }
 
 Progress::Progress(std::string label, std::uint64_t total)
-    : label_(std::move(label)), total_(total), active_(enabled()),
+    : label_(std::move(label)),
+      total_(total),
+      active_(enabled()),
       start_(std::chrono::steady_clock::now()) {}
 
-Progress::~Progress() { finish(); }
+Progress::~Progress() {
+  finish();
+}
 
 void Progress::advance(std::uint64_t n) {
   const std::uint64_t done = done_.fetch_add(n, std::memory_order_relaxed) + n;
@@ -41,7 +45,8 @@ void Progress::draw(std::uint64_t done, bool final) {
   const double frac = total_ ? std::min(1.0, static_cast<double>(done) / total_) : 1.0;
   const int width = 30;
   const int filled = static_cast<int>(frac * width);
-  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  const double secs =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   std::string bar(filled, '#');
   bar.append(width - filled, '.');
   std::fprintf(stderr, "\r%-22s [%s] %5.1f%%  %6.1fs%s", label_.c_str(), bar.c_str(), 100.0 * frac,

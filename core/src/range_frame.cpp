@@ -34,11 +34,16 @@ Intrinsics Intrinsics::from_fov(int width, int height, double hfov_rad, double v
 
 const char* to_string(ReadStatus status) {
   switch (status) {
-    case ReadStatus::kOk: return "ok";
-    case ReadStatus::kTimeout: return "timeout";
-    case ReadStatus::kEndOfStream: return "end of stream";
-    case ReadStatus::kDisconnected: return "disconnected";
-    case ReadStatus::kError: return "error";
+    case ReadStatus::kOk:
+      return "ok";
+    case ReadStatus::kTimeout:
+      return "timeout";
+    case ReadStatus::kEndOfStream:
+      return "end of stream";
+    case ReadStatus::kDisconnected:
+      return "disconnected";
+    case ReadStatus::kError:
+      return "error";
   }
   return "unknown";
 }

@@ -34,9 +34,9 @@ void expect_accounting(const PointCloud& input, const FilterResult& r) {
   const double merged = std::accumulate(mc.begin(), mc.end(), 0.0);
   EXPECT_EQ(static_cast<std::size_t>(merged) + r.outliers.size(), input.size());
   EXPECT_EQ(r.stats.points_out, r.cloud.size());
-  EXPECT_EQ(r.stats.unsupported + r.stats.low_density + r.stats.low_likelihood +
-                r.stats.small_components,
-            r.outliers.size());
+  EXPECT_EQ(
+      r.stats.unsupported + r.stats.low_density + r.stats.low_likelihood + r.stats.small_components,
+      r.outliers.size());
   EXPECT_EQ(r.stats.removed(), r.outliers.size());
   std::set<double> seen;
   for (double s : attr(r.cloud, "source_index").values) EXPECT_TRUE(seen.insert(s).second);

@@ -23,10 +23,10 @@ std::filesystem::path make_temp_dir(const std::string& tag);
 
 //! Skips the current test, with a message naming the missing path, when a shared-data file or
 //! folder is absent. Use at the top of a test body.
-#define SCANCLEAN_REQUIRE_SHARED(relpath)                                                     \
-  do {                                                                                        \
-    if (!std::filesystem::exists(::scanclean::test::shared_data_dir() / (relpath)))           \
-      GTEST_SKIP() << "shared data not available: "                                          \
-                   << (::scanclean::test::shared_data_dir() / (relpath)).string()             \
-                   << " (clone the repository with ../shared beside it to run this test)";   \
+#define SCANCLEAN_REQUIRE_SHARED(relpath)                                                  \
+  do {                                                                                     \
+    if (!std::filesystem::exists(::scanclean::test::shared_data_dir() / (relpath)))        \
+      GTEST_SKIP() << "shared data not available: "                                        \
+                   << (::scanclean::test::shared_data_dir() / (relpath)).string()          \
+                   << " (clone the repository with ../shared beside it to run this test)"; \
   } while (0)

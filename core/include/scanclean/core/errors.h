@@ -50,13 +50,13 @@ class UnavailableError : public Error {
 
 //! Process exit codes that scripts can rely on.
 enum class ExitCode : int {
-  kOk = 0,           //!< success
-  kFailure = 1,      //!< unexpected internal error
-  kBadOptions = 2,   //!< invalid command line or option value
-  kBadInput = 3,     //!< malformed or unsupported input data
-  kIoFailure = 4,    //!< cannot read or write a file
-  kUnavailable = 5,  //!< no device / driver / feature
-  kInterrupted = 130 //!< stopped by SIGINT (recordings stay valid up to the last frame)
+  kOk = 0,            //!< success
+  kFailure = 1,       //!< unexpected internal error
+  kBadOptions = 2,    //!< invalid command line or option value
+  kBadInput = 3,      //!< malformed or unsupported input data
+  kIoFailure = 4,     //!< cannot read or write a file
+  kUnavailable = 5,   //!< no device / driver / feature
+  kInterrupted = 130  //!< stopped by SIGINT (recordings stay valid up to the last frame)
 };
 
 //! The exit code documented for an exception of this type.

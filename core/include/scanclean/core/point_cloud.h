@@ -21,7 +21,9 @@ struct OrganizedGrid {
   std::vector<std::int32_t> index;  //!< rows*cols entries, row-major; -1 = empty cell
 
   bool empty() const { return rows == 0 || cols == 0; }
-  std::int32_t at(int row, int col) const { return index[static_cast<std::size_t>(row) * cols + col]; }
+  std::int32_t at(int row, int col) const {
+    return index[static_cast<std::size_t>(row) * cols + col];
+  }
 };
 
 //! Storage type of a named per-point attribute, as it is written to files.
@@ -38,10 +40,10 @@ struct Attribute {
 //! A point cloud. Units: metres unless a reader states otherwise (PLY/PCD carry no unit; the
 //! Stanford and PCL data are in metres).
 struct PointCloud {
-  std::vector<Eigen::Vector3d> positions;           //!< always present
-  std::vector<Eigen::Vector3f> normals;             //!< unit, oriented if known; empty = none
-  std::vector<float> confidences;                   //!< in [0, 1] (filter weights w_i); empty = none
-  std::vector<float> intensities;                   //!< scanner intensity; empty = none
+  std::vector<Eigen::Vector3d> positions;  //!< always present
+  std::vector<Eigen::Vector3f> normals;    //!< unit, oriented if known; empty = none
+  std::vector<float> confidences;          //!< in [0, 1] (filter weights w_i); empty = none
+  std::vector<float> intensities;          //!< scanner intensity; empty = none
   std::vector<std::array<std::uint8_t, 4>> colors;  //!< RGBA; empty = none
   std::vector<Attribute> attributes;                //!< further named per-point values
   OrganizedGrid grid;                               //!< empty unless organized

@@ -36,7 +36,7 @@ struct Ps1080Params {
 };
 
 struct RangeFrame {
-  std::uint64_t index = 0;      //!< source frame index; a gap means dropped frames
+  std::uint64_t index = 0;        //!< source frame index; a gap means dropped frames
   std::int64_t device_ts_us = 0;  //!< device timestamp (microseconds)
   std::int64_t host_ts_ns = 0;    //!< host receive time (steady clock, nanoseconds)
 

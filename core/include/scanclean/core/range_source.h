@@ -26,14 +26,16 @@ const char* to_string(ReadStatus status);
 
 //! What a source is, for metadata, the noise model and the user.
 struct SourceInfo {
-  std::string uri;         //!< what was opened, e.g. "openni2://", "rec/session1", "x.oni"
-  std::string kind;        //!< "openni2", "oni", "vsensor", "recording", "depth-images", "structured-light"
+  std::string uri;  //!< what was opened, e.g. "openni2://", "rec/session1", "x.oni"
+  std::string
+      kind;  //!< "openni2", "oni", "vsensor", "recording", "depth-images", "structured-light"
   std::string vendor, name, serial, usb_id, firmware;
-  bool is_live = false;    //!< a physical device (pacing is real time)
+  bool is_live = false;                      //!< a physical device (pacing is real time)
   std::optional<std::uint64_t> frame_count;  //!< known for finite sources
-  Intrinsics K;            //!< nominal or calibrated
+  Intrinsics K;                              //!< nominal or calibrated
   double depth_unit_m = 0.001;
-  std::string noise_model = "none";  //!< "nguyen2012" (PrimeSense class), "structured-light", "none"
+  std::string noise_model =
+      "none";  //!< "nguyen2012" (PrimeSense class), "structured-light", "none"
   std::optional<Ps1080Params> ps1080;
 };
 

@@ -78,10 +78,10 @@ struct FilterOptions {
   double merge_eps = -1;  //!< < 0: 0.25 x mean spacing; 0: no merging; > 0: metres
   double tau = 0.1;       //!< drop points whose density < tau x median density, [0, 1]
   //! Drop points whose likelihood L < likelihood_ratio x the lower quartile of L over the
-  //! output points within h, [0, 1]; 0 = off. Catches outliers closer than h to the surface, which the
-  //! surface kernels (or their own, stretched towards them by their own weight) keep where
-  //! they are: their L is 0.03-0.2 of their surroundings', while inliers' L, rims included,
-  //! stays above 0.3 of it (measured on the benchmark's shapes).
+  //! output points within h, [0, 1]; 0 = off. Catches outliers closer than h to the surface, which
+  //! the surface kernels (or their own, stretched towards them by their own weight) keep where they
+  //! are: their L is 0.03-0.2 of their surroundings', while inliers' L, rims included, stays above
+  //! 0.3 of it (measured on the benchmark's shapes).
   double likelihood_ratio = 0.25;
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
