@@ -22,13 +22,14 @@ namespace scanclean::app {
 // Defined in cmd_replay.cpp.
 std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd);
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
-                  const std::filesystem::path& output);
+                  const std::filesystem::path& output, const std::filesystem::path& outliers);
 
 namespace {
 
 struct CaptureCommandOptions {
   std::string source = "openni2://";
   std::string output;
+  std::string outliers;
   std::string record;
   std::uint64_t frames = 0;
   double seconds = 0;
@@ -47,7 +48,7 @@ int run_capture(const CaptureCommandOptions& c,
   so.depth_100um = c.depth_100um;
   std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
   if (!c.record.empty()) source = make_recording_source(std::move(source), c.record);
-  const int rc = run_clean_job("capture", *source, o, c.output);
+  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers);
   source.reset();  // finishes the recording folder (if any)
   if (!c.record.empty())
     std::fprintf(stderr, "scanclean capture: raw frames recorded in %s\n", c.record.c_str());
@@ -56,7 +57,7 @@ int run_capture(const CaptureCommandOptions& c,
 
 const CommandRegistrar kRegistrar{{
     "capture",
-    "Live capture-and-clean: frames from a sensor (or any source) -> robust filter -> PLY",
+    "Live capture-and-clean: frames from a sensor (or any source) -> robust filter -> point cloud",
     42,
     [](CLI::App& cmd) {
       auto c = std::make_shared<CaptureCommandOptions>();
@@ -66,6 +67,9 @@ const CommandRegistrar kRegistrar{{
           ->default_val("openni2://");
       cmd.add_option("-o,--output", c->output, "Output point cloud (.ply .pcd .xyz, metres)")
           ->required();
+      cmd.add_option("--outliers", c->outliers,
+                     "Also write the points the filter removed (flags: 1 unsupported, 2 "
+                     "outlier), numbered like the output when there are several windows");
       cmd.add_option("--record", c->record,
                      "Also record the raw frames to this recording folder (format v1, crash-safe; "
                      "replay it later with scanclean replay)");

@@ -156,11 +156,16 @@ std::string seconds_text(double s) {
 // Runs the capture-and-clean job on `source` (not yet opened) and writes the outputs. Returns
 // the exit code: 0, 130 after SIGINT (what was captured is written), 3 on a read error.
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
-                  const std::filesystem::path& output) {
+                  const std::filesystem::path& output, const std::filesystem::path& outliers) {
   const std::string ext = output.extension().string();
   if (ext != ".ply" && ext != ".pcd" && ext != ".xyz" && ext != ".txt")
     throw OptionError(command + ": output \"" + output.string() +
                       "\" must end in .ply, .pcd, .xyz or .txt");
+  if (!outliers.empty() && point_cloud_format(outliers).empty())
+    throw OptionError(command + ": --outliers \"" + outliers.string() +
+                      "\" must end in .ply, .pcd, .xyz or .txt");
+  if (!outliers.empty() && options.raw)
+    throw OptionError(command + ": --outliers needs the filter (it is off with --raw)");
   validate(options);
   install_sigint_handler();
   options.keep_going = [] { return !interrupted(); };
@@ -186,6 +191,8 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     const std::filesystem::path p = numbered ? window_path(output, w.window) : output;
     write_point_cloud(p, w.cloud);
     written.push_back(p);
+    if (!outliers.empty())
+      write_point_cloud(numbered ? window_path(outliers, w.window) : outliers, w.outliers);
   };
   const PipelineStats st = run_pipeline(
       source, options,
@@ -292,6 +299,7 @@ namespace {
 struct ReplayCommandOptions {
   std::string source;
   std::string output;
+  std::string outliers;
   std::string frames;
   std::string depth_format = "auto";
   double fx = 0, fy = 0, cx = -1, cy = -1;
@@ -317,7 +325,7 @@ int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineO
     so.K = K;
   }
   auto source = make_range_source(c.source, so);
-  return run_clean_job("replay", *source, o, c.output);
+  return run_clean_job("replay", *source, o, c.output, c.outliers);
 }
 
 const CommandRegistrar kRegistrar{{
@@ -330,6 +338,9 @@ const CommandRegistrar kRegistrar{{
       cmd.add_option("-o,--output", c->output,
                      "Output point cloud (.ply .pcd .xyz, metres, camera frame)")
           ->required();
+      cmd.add_option("--outliers", c->outliers,
+                     "Also write the points the filter removed (flags: 1 unsupported, 2 "
+                     "outlier), numbered like the output when there are several windows");
       cmd.add_option("--frames", c->frames,
                      "Frame range A:B (delivery order from 0, B exclusive; A: = to the end, N = "
                      "the first N)");

@@ -889,41 +889,44 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       hs[s] = static_cast<float>(d.hi_at(cl.seed[rord[s]]));
     });
     std::vector<std::uint8_t> drop(R, 0);
-    if (o.tau > 0) {
-      std::vector<double> rho(R, 0.0);
-      parallel_each(R, [&](std::size_t s) {
-        std::uint64_t sum = 0;
-        ridx.for_each_slot_within(ridx.slot_point(s), hs[s],
-                                  [&](std::uint32_t q, float) { sum += cnt[q]; });
-        rho[s] = static_cast<double>(sum);
-      });
-      const double threshold = o.tau * median_of(rho);
-      for (std::size_t s = 0; s < R; ++s)
-        if (rho[s] < threshold) drop[s] = kFlagOutlier;
-    }
-    if (o.likelihood_ratio > 0) {
+    if (o.tau > 0 || o.likelihood_ratio > 0) {
+      // One pass over the output points within h of each: the density rho (input points they
+      // stand for) and, for the likelihood-ratio test, the lower quartile of their likelihoods.
       // A point that stopped off the surface (a near outlier supported by the surface kernels,
       // or by its own kernel, which its own weight stretches towards it) has a likelihood far
       // below that of the surface points around it; a point of a sparse region or at a rim
-      // does not, as its neighbours are as sparse. Compare with the lower quartile of the
-      // likelihoods of the output points within h (itself included).
-      std::vector<float> lik(R);
-      parallel_each(R, [&](std::size_t s) { lik[s] = pr.L[cl.seed[rord[s]]]; });
+      // does not, as its neighbours are as sparse. The lower quartile, not the median: a point
+      // on a rim or in a corner has neighbours with up to 4x its L (measured: the median
+      // dropped 0.5 % of a clean square's points, all within h of its border; the lower
+      // quartile 0.16 %, with the same outliers found).
+      const bool by_l = o.likelihood_ratio > 0;
+      std::vector<float> lik(by_l ? R : 0);
+      if (by_l) parallel_each(R, [&](std::size_t s) { lik[s] = pr.L[cl.seed[rord[s]]]; });
+      std::vector<double> rho(R, 0.0);
+      std::vector<float> l_ref(by_l ? R : 0, 0.0f);
       parallel_each(R, [&](std::size_t s) {
-        if (drop[s]) return;
         thread_local std::vector<float> around;
         around.clear();
-        ridx.for_each_slot_within(ridx.slot_point(s), hs[s],
-                                  [&](std::uint32_t q, float) { around.push_back(lik[q]); });
-        if (around.empty()) return;
-        // The lower quartile, not the median: a point on a rim or in a corner has neighbours
-        // with up to 4x its L (measured: the median dropped 0.5 % of a clean square's points,
-        // all within h of its border; the lower quartile 0.16 %, with the same outliers found).
-        const auto mid = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 4);
-        std::nth_element(around.begin(), mid, around.end());
-        if (static_cast<double>(lik[s]) < o.likelihood_ratio * static_cast<double>(*mid))
-          drop[s] = kFlagOutlier | 16;  // 16: internal mark "low likelihood"
+        std::uint64_t sum = 0;
+        ridx.for_each_slot_within(ridx.slot_point(s), hs[s], [&](std::uint32_t q, float) {
+          sum += cnt[q];
+          if (by_l) around.push_back(lik[q]);
+        });
+        rho[s] = static_cast<double>(sum);
+        if (by_l && !around.empty()) {
+          const auto quartile = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 4);
+          std::nth_element(around.begin(), quartile, around.end());
+          l_ref[s] = *quartile;
+        }
       });
+      const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
+      for (std::size_t s = 0; s < R; ++s) {
+        if (rho[s] < threshold)
+          drop[s] = kFlagOutlier;
+        else if (by_l &&
+                 static_cast<double>(lik[s]) < o.likelihood_ratio * static_cast<double>(l_ref[s]))
+          drop[s] = kFlagOutlier | 16;  // 16: internal mark "low likelihood"
+      }
     }
     report(o, "outliers", 0.5);
     if (o.remove_small_components) {

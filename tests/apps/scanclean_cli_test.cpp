@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -204,6 +205,29 @@ TEST(ScancleanCliTest, ReplayOfTheBundledRecordingWritesAnOrganizedRawFrame) {
     ASSERT_GT(p.z(), 0.3);  // metres, in front of the camera, within the PS1080's range
     ASSERT_LT(p.z(), 10.5);
   }
+}
+
+TEST(ScancleanCliTest, ReplayFusesFramesAndWritesWhatTheFilterRemoved) {
+  const auto dir = test::make_temp_dir("cli");
+  const fs::path oni = test::recordings_dir() / "oni" / "3dj_test.oni";
+  const fs::path out = dir / "near.ply", removed = dir / "removed.ply";
+  // Three frames of the near part of the scene (up to 1.5 m), no merging: every fused point
+  // is either in the output or in the outliers file.
+  const ProgramRun r = run({"replay", oni.string(), "--frames", "0:3", "--max-depth", "1.5",
+                            "--merge-eps", "0", "-o", out.string(), "--outliers", removed.string()},
+                           dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto at = r.out.find("fused per pixel:");
+  ASSERT_NE(at, std::string::npos) << r.out;
+  std::string digits;
+  for (std::size_t k = at + 16; k < r.out.size() && r.out[k] != '('; ++k)
+    if (std::isdigit(static_cast<unsigned char>(r.out[k]))) digits += r.out[k];
+  const std::size_t fused = std::stoul(digits);
+  const PointCloud kept = read_point_cloud(out), dropped = read_point_cloud(removed);
+  EXPECT_EQ(kept.size() + dropped.size(), fused);
+  EXPECT_GT(kept.size(), 60000u);         // about 69k valid pixels per frame up to 1.5 m
+  EXPECT_LT(dropped.size(), fused / 20);  // a few per cent at most: edges and stray pixels
+  for (const auto& p : kept.positions) ASSERT_LT(p.z(), 1.5 + 0.05);
 }
 #endif
 
