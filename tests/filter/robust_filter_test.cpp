@@ -172,6 +172,59 @@ TEST(RobustFilterTest, UniformOutliersAreRemovedAndInliersKept) {
   expect_accounting(c, r);
 }
 
+TEST(RobustFilterTest, NoiseWiderThanTheNeighbourScaleRaisesH) {
+  // 20k points on a unit square: the 96th neighbour lies about 0.04 away, about 2 sigma of the
+  // noise (0.02). The scale must follow the noise (to about 5 sigma), and the noise fall.
+  PointCloud c = test::noisy_plane(20000, 1.0, 0.02, 31);  // seed 31
+  c.normals.clear();
+  const FilterResult r = robust_filter(c, no_merge());
+  EXPECT_GT(r.stats.h, 1.8 * r.stats.h0);
+  EXPECT_GT(r.stats.noise_sigma, 0.7 * 0.02);              // measured at h, close to the truth
+  EXPECT_LT(r.stats.noise_sigma_h0, r.stats.noise_sigma);  // biased low at h0
+  EXPECT_LT(rms_z(r.cloud) * 4, rms_z(c)) << rms_z(r.cloud) << " vs " << rms_z(c);
+  // The spec's literal rule (3 sigma measured at h0) leaves h at h0 and the noise high.
+  FilterOptions spec = no_merge();
+  spec.noise_factor = 3;
+  const FilterResult s = robust_filter(c, spec);
+  EXPECT_EQ(s.stats.h, s.stats.h0);
+  EXPECT_LT(rms_z(r.cloud), rms_z(s.cloud));
+  expect_accounting(c, r);
+}
+
+TEST(RobustFilterTest, OutliersCloserThanHAreRemovedOrProjected) {
+  // Outliers 0.3 h .. 0.9 h off a plane have surface kernels within reach and one of their own;
+  // without the likelihood-ratio test they stay where they are.
+  PointCloud c = test::noisy_plane(20000, 1.0, 0.002, 32);  // seed 32
+  c.normals.clear();
+  const std::size_t inliers = c.size();
+  const double h_guess = robust_filter(c, no_merge()).stats.h;
+  std::mt19937 rng(33);  // seed 33
+  std::uniform_real_distribution<double> u(-0.4, 0.4), off(0.3, 0.9);
+  for (int k = 0; k < 200; ++k)
+    c.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng) * h_guess);
+  auto handled = [&](const FilterResult& r) {
+    std::size_t n = 0;
+    const auto& src = attr(r.cloud, "source_index").values;
+    std::set<std::size_t> kept_far;
+    for (std::size_t k = 0; k < r.cloud.size(); ++k)
+      if (src[k] >= inliers && std::abs(r.cloud.positions[k].z()) > 3 * 0.002)
+        kept_far.insert(static_cast<std::size_t>(src[k]));
+    for (std::size_t i = inliers; i < c.size(); ++i) n += kept_far.count(i) ? 0 : 1;
+    return n;  // removed, or moved onto the plane (within 3 sigma)
+  };
+  FilterOptions off_test = no_merge();
+  off_test.likelihood_ratio = 0;
+  const FilterResult without = robust_filter(c, off_test);
+  const FilterResult with = robust_filter(c, no_merge());
+  EXPECT_LT(handled(without), 150u);  // the failure the test exists for
+  EXPECT_GE(handled(with), 196u);     // 98 %
+  std::size_t inliers_kept = 0;
+  for (double s : attr(with.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
+  EXPECT_GE(static_cast<double>(inliers_kept), 0.995 * inliers);
+  EXPECT_GT(with.stats.low_likelihood, 0u);
+  expect_accounting(c, with);
+}
+
 TEST(RobustFilterTest, SheetsAGapOfHApartStayApartAndCloserOnesMerge) {
   FilterOptions o = no_merge();
   o.scale = ScaleMode::kFixed;
@@ -346,6 +399,10 @@ TEST(RobustFilterTest, ValidateRejectsEachBadOption) {
        [](FilterOptions& o) { o.merge_eps = std::numeric_limits<double>::infinity(); }},
       {"tau", [](FilterOptions& o) { o.tau = 1.5; }},
       {"tau", [](FilterOptions& o) { o.tau = -0.1; }},
+      {"noise_factor", [](FilterOptions& o) { o.noise_factor = 0; }},
+      {"noise_factor", [](FilterOptions& o) { o.noise_factor = 25; }},
+      {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = -0.5; }},
+      {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = 2; }},
       {"threads", [](FilterOptions& o) { o.threads = -1; }},
       {"min_component_size", [](FilterOptions& o) { o.min_component_size = 10000000000ULL; }},
   };
