@@ -193,6 +193,7 @@ struct Params {
   bool oriented = false;
   double cell = 0;              // grid cell (h, or median h_i)
   double gather_factor = 1.25;  // candidate radius / h
+  std::size_t stride = 1;       // a kernel at every stride-th point (in d's order), weight x stride
 };
 
 // Builds the kernels of all points of d. `nref` receives each point's kernel normal (zero if it
@@ -209,7 +210,9 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
   std::vector<float> rec(R * n, 0.0f);  // point order first
   nref.assign(n, Eigen::Vector3f::Zero());
   const double floor2 = o.eigen_floor * o.eigen_floor;
+  const std::size_t stride = std::max<std::size_t>(1, prm.stride);
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
+    if (i % stride != 0) return;  // d is in grid order: a spatially even subsample
     const double h = d.hi_at(i);
     const Eigen::Vector3f qi =
         kSlots ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
@@ -241,7 +244,7 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
     r[8] = static_cast<float>(2 * s_inv(1, 2));
     for (int k = 0; k < 3; ++k) r[9 + k] = fit.n[k];
     r[12] = static_cast<float>(h2);
-    r[13] = d.w_at(i);
+    r[13] = d.w_at(i) * static_cast<float>(stride);
     valid[i] = 1;
   });
   point_index.reset();  // the point index is not needed any more (memory)
@@ -779,6 +782,12 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   prm.oriented = use_v;
   prm.cell = h;
   prm.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
+  if (o.kernel_stride > 0)
+    prm.stride = static_cast<std::size_t>(o.kernel_stride);
+  else if (o.scale == ScaleMode::kAuto && st.h0 > 0)  // about K_h kernels within h
+    prm.stride =
+        static_cast<std::size_t>(std::clamp(std::floor((h / st.h0) * (h / st.h0)), 1.0, 64.0));
+  st.kernel_stride = static_cast<int>(prm.stride);
   std::vector<Eigen::Vector3d> x;  // projected positions (data order), initially d.p
   Projected pr;
   {
@@ -900,6 +909,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       // dropped 0.5 % of a clean square's points, all within h of its border; the lower
       // quartile 0.16 %, with the same outliers found).
       const bool by_l = o.likelihood_ratio > 0;
+      const std::uint32_t l_stride = static_cast<std::uint32_t>(prm.stride);
       std::vector<float> lik(by_l ? R : 0);
       if (by_l) parallel_each(R, [&](std::size_t s) { lik[s] = pr.L[cl.seed[rord[s]]]; });
       std::vector<double> rho(R, 0.0);
@@ -910,8 +920,11 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         std::uint64_t sum = 0;
         ridx.for_each_slot_within(ridx.slot_point(s), hs[s], [&](std::uint32_t q, float) {
           sum += cnt[q];
-          if (by_l) around.push_back(lik[q]);
+          // The quartile from an even subsample (slots are in grid order) when the kernels
+          // are thinned too: about K_h values either way.
+          if (by_l && q % l_stride == 0) around.push_back(lik[q]);
         });
+        if (by_l && around.empty()) around.push_back(lik[s]);
         rho[s] = static_cast<double>(sum);
         if (by_l && !around.empty()) {
           const auto quartile = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 4);
@@ -1049,6 +1062,7 @@ void validate(const FilterOptions& o) {
   check_int("k_min", o.k_min, 3, 1000);
   check_real("truncation_sigma", o.truncation_sigma, 0, 10, true);
   check_real("noise_factor", o.noise_factor, 0, 20, true);
+  check_int("kernel_stride", o.kernel_stride, 0, 64);
   check_real("slab", o.slab, 0, 10, true);
   check_real("eigen_floor", o.eigen_floor, 0, 1, true);
   check_real("tolerance", o.tolerance, 0, 0.1, true);

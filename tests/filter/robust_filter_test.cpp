@@ -189,6 +189,21 @@ TEST(RobustFilterTest, NoiseWiderThanTheNeighbourScaleRaisesH) {
   EXPECT_EQ(s.stats.h, s.stats.h0);
   EXPECT_LT(rms_z(r.cloud), rms_z(s.cloud));
   expect_accounting(c, r);
+  // h about 2x h0: kernels at every (h / h0)^2-th point; a kernel at every point is only
+  // marginally smoother, and the thinned run is deterministic across thread counts too.
+  EXPECT_GE(r.stats.kernel_stride, 3);
+  EXPECT_LE(r.stats.kernels, c.size() / 3 + 1);
+  FilterOptions all = no_merge();
+  all.kernel_stride = 1;
+  const FilterResult a = robust_filter(c, all);
+  EXPECT_EQ(a.stats.kernel_stride, 1);
+  EXPECT_LT(rms_z(r.cloud), 1.15 * rms_z(a.cloud));
+  FilterOptions one = no_merge();
+  one.threads = 1;
+  const FilterResult r1 = robust_filter(c, one);
+  ASSERT_EQ(r1.cloud.size(), r.cloud.size());
+  for (std::size_t k = 0; k < r.cloud.size(); ++k)
+    ASSERT_EQ(r1.cloud.positions[k], r.cloud.positions[k]) << k;
 }
 
 TEST(RobustFilterTest, OutliersCloserThanHAreRemovedOrProjected) {
@@ -400,6 +415,8 @@ TEST(RobustFilterTest, ValidateRejectsEachBadOption) {
       {"tau", [](FilterOptions& o) { o.tau = 1.5; }},
       {"tau", [](FilterOptions& o) { o.tau = -0.1; }},
       {"noise_factor", [](FilterOptions& o) { o.noise_factor = 0; }},
+      {"kernel_stride", [](FilterOptions& o) { o.kernel_stride = -1; }},
+      {"kernel_stride", [](FilterOptions& o) { o.kernel_stride = 65; }},
       {"noise_factor", [](FilterOptions& o) { o.noise_factor = 25; }},
       {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = -0.5; }},
       {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = 2; }},

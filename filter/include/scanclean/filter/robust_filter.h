@@ -66,6 +66,11 @@ struct FilterOptions {
   //! biased low there) and left 50k-point shapes at 3 % noise almost unfiltered; 6 solves the
   //! fixed point at h of about 5 true sigma.
   double noise_factor = 6.0;
+  //! Kernels at every kernel_stride-th point (spatially even, in grid order), their weights
+  //! multiplied by the stride, [0, 64]. 1: a kernel at every point (the paper). 0 (automatic):
+  //! 1, unless kAuto raised h above h0 for the noise; then floor((h / h0)^2), so that a
+  //! neighbourhood still holds about K_h kernels instead of K_h (h / h0)^2.
+  int kernel_stride = 0;
   int k_adaptive = 48;            //!< neighbour rank for per-point h_i (kAdaptive), [2, 1000]
   int k_min = 8;                  //!< fewer neighbours within h_i: no kernel, [3, 1000]
   double truncation_sigma = 3.0;  //!< Phi cut at this many sigma, (0, 10]
@@ -122,6 +127,7 @@ struct FilterStats {
   double mean_spacing = 0;      //!< s = h0 / sqrt(K_h / pi) (kAuto), else h / sqrt(K / pi) (metres)
   double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at the final scale (metres)
   double noise_sigma_h0 = 0;    //!< kAuto: the same at h0 (biased low when h0 < ~6 sigma)
+  int kernel_stride = 1;        //!< kernels at every kernel_stride-th point
   double merge_eps = 0;         //!< merging distance used (metres)
   double mean_iterations = 0;
   double p95_iterations = 0;
