@@ -230,9 +230,9 @@ const CommandRegistrar kRegistrar{{
                      "Drop points whose density is below tau x the median density (0 = off)")
           ->capture_default_str();
       cmd.add_option("--likelihood-ratio", c->likelihood_ratio,
-                     "Drop points whose likelihood is below this fraction of the median "
-                     "likelihood of the points within h (points stopped off the surface; 0 = "
-                     "off)")
+                     "Drop points whose likelihood is below this fraction of the lower "
+                     "quartile of the likelihoods of the points within h (points stopped off "
+                     "the surface; 0 = off)")
           ->capture_default_str();
       cmd.add_option("--small-components", c->small_components,
                      "Also drop connected pieces (link radius h) with fewer input points than "

@@ -91,7 +91,8 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
   cmd.add_option("--tau", v->tau, "Drop points with density < tau x median density (0 = off)")
       ->capture_default_str();
   cmd.add_option("--likelihood-ratio", v->likelihood_ratio,
-                 "Drop points with likelihood < this x the median likelihood within h (0 = off)")
+                 "Drop points with likelihood < this x the lower quartile of the likelihoods "
+                 "within h (0 = off)")
       ->capture_default_str();
   cmd.add_option("--passes", v->passes, "Filter passes (1 or 2)")->default_val(1);
   cmd.add_option("--threads", v->threads,
