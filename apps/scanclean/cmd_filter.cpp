@@ -158,8 +158,10 @@ int run_filter(const FilterCommandOptions& c) {
   if (o.scale == ScaleMode::kAuto)
     sum.add("noise sigma (estimate)", s.noise_sigma * 1000.0, 3, "mm");
   sum.add("mean spacing", s.mean_spacing * 1000.0, 3, "mm");
-  sum.add("kernels", with_thousands(s.kernels) + " (every " + std::to_string(s.kernel_stride) +
-                         (s.kernel_stride == 1 ? "st" : "th") + " point)");
+  sum.add("kernels", with_thousands(s.kernels) +
+                         (s.kernel_stride == 1
+                              ? std::string(" (at every point)")
+                              : " (at one point in " + std::to_string(s.kernel_stride) + ")"));
   sum.add("merge eps", s.merge_eps * 1000.0, 3, "mm");
   sum.add("iterations", std::to_string(s.mean_iterations).substr(0, 4) + " mean, " +
                             std::to_string(static_cast<int>(s.p95_iterations)) + " p95");
