@@ -158,13 +158,13 @@ std::string seconds_text(double s) {
 // the exit code: 0, 130 after SIGINT (what was captured is written), 3 on a read error.
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
                   const std::filesystem::path& output, const std::filesystem::path& outliers) {
-  const std::string ext = output.extension().string();
-  if (ext != ".ply" && ext != ".pcd" && ext != ".xyz" && ext != ".txt")
-    throw OptionError(command + ": output \"" + output.string() +
-                      "\" must end in .ply, .pcd, .xyz or .txt");
-  if (!outliers.empty() && point_cloud_format(outliers).empty())
-    throw OptionError(command + ": --outliers \"" + outliers.string() +
-                      "\" must end in .ply, .pcd, .xyz or .txt");
+  auto check_format = [&](const std::string& what, const std::filesystem::path& path) {
+    if (point_cloud_format(path).empty())
+      throw OptionError(command + ": " + what + " \"" + path.string() +
+                        "\" must end in .ply, .pcd, .xyz or .txt");
+  };
+  check_format("output", output);
+  if (!outliers.empty()) check_format("--outliers", outliers);
   if (!outliers.empty() && options.raw)
     throw OptionError(command + ": --outliers needs the filter (it is off with --raw)");
   validate(options);

@@ -924,9 +924,9 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
           // are thinned too: about K_h values either way.
           if (by_l && q % l_stride == 0) around.push_back(lik[q]);
         });
-        if (by_l && around.empty()) around.push_back(lik[s]);
         rho[s] = static_cast<double>(sum);
-        if (by_l && !around.empty()) {
+        if (by_l) {
+          if (around.empty()) around.push_back(lik[s]);  // s itself is off the subsample
           const auto quartile = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 4);
           std::nth_element(around.begin(), quartile, around.end());
           l_ref[s] = *quartile;
