@@ -69,6 +69,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   run.mean_iterations = s.mean_iterations;
   run.p95_iterations = s.p95_iterations;
   run.unsupported = s.unsupported;
+  run.off_surface = s.off_surface;
   run.low_density = s.low_density;
   run.low_likelihood = s.low_likelihood;
   run.small_components = s.small_components;

@@ -85,9 +85,9 @@ void run_real_suite(Context& ctx) {
   t.notes.push_back("robust_filter settings: " + fs.describe() + "; h = " + fmt(run.h * 1e3, 3) +
                     " mm, estimated noise sigma = " + fmt(run.noise_sigma * 1e3, 3) + " mm.");
   t.notes.push_back("Input points removed as outliers: " + fmt_count(merged.size() - kept_inputs) +
-                    " (unsupported " + fmt_count(run.unsupported) + ", low density " +
-                    fmt_count(run.low_density) + ", low likelihood " +
-                    fmt_count(run.low_likelihood) + ", small components " +
+                    " (unsupported " + fmt_count(run.unsupported) + ", off surface " +
+                    fmt_count(run.off_surface) + ", low density " + fmt_count(run.low_density) +
+                    ", low likelihood " + fmt_count(run.low_likelihood) + ", small components " +
                     fmt_count(run.small_components) +
                     "); merged into other output points: " + fmt_count(run.merged) + ".");
   for (const auto& w : report.warnings) t.notes.push_back("reader: " + w);

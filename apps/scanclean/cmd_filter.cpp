@@ -32,6 +32,7 @@ struct FilterCommandOptions {
   double noise_factor = FilterOptions{}.noise_factor;
   int kernel_stride = FilterOptions{}.kernel_stride;
   double likelihood_ratio = FilterOptions{}.likelihood_ratio;
+  double outlier_sigma = FilterOptions{}.outlier_sigma;
   std::string update = "normal";
   double merge_eps = -1;
   double tau = FilterOptions{}.tau;
@@ -89,6 +90,7 @@ int run_filter(const FilterCommandOptions& c) {
   o.noise_factor = c.noise_factor;
   o.kernel_stride = c.kernel_stride;
   o.likelihood_ratio = c.likelihood_ratio;
+  o.outlier_sigma = c.outlier_sigma;
   o.k_min = c.k_min;
   o.max_iterations = c.max_iterations;
   o.update = c.update == "vector" ? UpdateMode::kVector : UpdateMode::kNormal;
@@ -138,7 +140,8 @@ int run_filter(const FilterCommandOptions& c) {
   sum.add_count("points out", s.points_out);
   sum.add_count("merged into others", s.merged);
   sum.add("outliers removed", with_thousands(s.removed()) + " (unsupported " +
-                                  with_thousands(s.unsupported) + ", low density " +
+                                  with_thousands(s.unsupported) + ", off surface " +
+                                  with_thousands(s.off_surface) + ", low density " +
                                   with_thousands(s.low_density) + ", low likelihood " +
                                   with_thousands(s.low_likelihood) + ", small components " +
                                   with_thousands(s.small_components) + ")");
@@ -230,6 +233,11 @@ const CommandRegistrar kRegistrar{{
                      "default 0.25 x mean spacing");
       cmd.add_option("--tau", c->tau,
                      "Drop points whose density is below tau x the median density (0 = off)")
+          ->capture_default_str();
+      cmd.add_option("--outlier-sigma", c->outlier_sigma,
+                     "Before projecting, drop points farther than this many standard deviations "
+                     "from every kernel around them, each kernel refitted without the point and "
+                     "its own centre (catches outliers closer than h; 0 = off)")
           ->capture_default_str();
       cmd.add_option("--likelihood-ratio", c->likelihood_ratio,
                      "Drop points whose likelihood is below this fraction of the lower "

@@ -53,6 +53,7 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
     int k_h = FilterOptions{}.k_h;
     double noise_factor = FilterOptions{}.noise_factor;
     double likelihood_ratio = FilterOptions{}.likelihood_ratio;
+    double outlier_sigma = FilterOptions{}.outlier_sigma;
     double merge_eps = -1;
     double tau = FilterOptions{}.tau;
     int threads = 0;
@@ -90,6 +91,10 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
                  "mean spacing");
   cmd.add_option("--tau", v->tau, "Drop points with density < tau x median density (0 = off)")
       ->capture_default_str();
+  cmd.add_option("--outlier-sigma", v->outlier_sigma,
+                 "Drop points farther than this many standard deviations from every kernel "
+                 "refitted without them (0 = off)")
+      ->capture_default_str();
   cmd.add_option("--likelihood-ratio", v->likelihood_ratio,
                  "Drop points with likelihood < this x the lower quartile of the likelihoods "
                  "within h (0 = off)")
@@ -125,6 +130,7 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
     o.filter.k_h = v->k_h;
     o.filter.noise_factor = v->noise_factor;
     o.filter.likelihood_ratio = v->likelihood_ratio;
+    o.filter.outlier_sigma = v->outlier_sigma;
     o.filter.merge_eps = v->merge_eps;
     o.filter.tau = v->tau;
     o.filter.passes = v->passes;

@@ -133,6 +133,36 @@ template <class V, class VI>
 }
 
 template <class V, class VI>
+[[gnu::always_inline]] inline float min_e_impl(CandidateBuffer& b, const float x[3]) {
+  constexpr int W = sizeof(V) / sizeof(float);
+  const float inf = std::numeric_limits<float>::infinity();
+  const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
+  float* e_out = b.f[CandidateBuffer::kE].data();
+  V vmin = V{} + inf;
+  for (std::size_t j = 0; j < b.padded; j += W) {
+    const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
+    const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
+    const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
+    const V e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
+                load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
+                load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
+                (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
+                 load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
+                 load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
+    const V d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
+                dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
+                dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    const VI keep = d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]);
+    const V em = keep ? e : V{} + inf;
+    std::memcpy(e_out + j, &em, sizeof(V));
+    vmin = em < vmin ? em : vmin;
+  }
+  float emin = inf;
+  for (int l = 0; l < W; ++l) emin = std::min(emin, vmin[l]);
+  return emin;
+}
+
+template <class V, class VI>
 [[gnu::always_inline]] inline double likelihood_impl(CandidateBuffer& b, const float x[3],
                                                      float t2) {
   constexpr int W = sizeof(V) / sizeof(float);
@@ -174,6 +204,12 @@ typedef int VI8 __attribute__((vector_size(32)));
 }
 [[gnu::target("avx2,fma")]] double likelihood_avx2(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V8, VI8>(b, x, t2);
+}
+[[gnu::target("avx2,fma")]] float min_e_avx2(CandidateBuffer& b, const float x[3]) {
+  return min_e_impl<V8, VI8>(b, x);
+}
+float min_e_sse(CandidateBuffer& b, const float x[3]) {
+  return min_e_impl<V4, VI4>(b, x);
 }
 bool step_sse(CandidateBuffer& b, const float x[3], const float nref[3], float t2, StepSums& out) {
   return step_impl<V4, VI4>(b, x, nref, t2, out);
@@ -237,6 +273,10 @@ bool have_avx2() {
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out) {
   return have_avx2() ? step_avx2(buffer, x, nref, t2, out) : step_sse(buffer, x, nref, t2, out);
+}
+
+float min_mahalanobis(CandidateBuffer& buffer, const float x[3]) {
+  return have_avx2() ? min_e_avx2(buffer, x) : min_e_sse(buffer, x);
 }
 
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2) {

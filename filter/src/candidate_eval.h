@@ -34,7 +34,8 @@ struct CandidateBuffer {
     kW,  // (slab h_j)^2, h_j^2, w_j
     kE   // scratch: masked Mahalanobis e_j
   };
-  //! Kernel record layout (16 floats, one cache line): c(3), S^-1 (6, as above), n(3), h2, w.
+  //! Kernel record layout (16 floats, one cache line): c(3), S^-1 (6, as above), n(3), h2, w,
+  //! 2 unused.
   static constexpr std::size_t kRecord = 16;
   std::vector<float> f[kFields];
   std::vector<float> d;  // scratch: signed distances d_j
@@ -77,6 +78,9 @@ void append_records(CandidateBuffer& buffer, const float* rec_base, const std::u
 //! s_j n_j with s_j = sign(n_j . nref).
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out);
+//! min e_j at x over the candidates that pass the slab test (d_j^2 < slab2_j); +inf if there is
+//! none. Fills buffer.f[kE] with e_j (+inf where the slab test fails).
+float min_mahalanobis(CandidateBuffer& buffer, const float x[3]);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
 //! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error ~1e-7).

@@ -29,6 +29,9 @@ double since(Clock::time_point t) {
 }
 
 constexpr std::size_t kGrain = 256;
+constexpr std::uint32_t kNone = 0xffffffffu;
+// Internal mark in Projected::flags: dropped before projection by the off-surface test.
+constexpr std::uint8_t kMarkOffSurface = 32;
 
 // Runs f(i) for i in [0, n) in parallel. Per-index work is independent, so the result does not
 // depend on how TBB splits the range.
@@ -126,20 +129,33 @@ struct Fit {
   Eigen::Vector3d lambda;  // ascending eigenvalues of C (m^2), not floored
   Eigen::Matrix3d e;       // eigenvectors (columns, matching lambda)
   Eigen::Vector3f n;       // kernel normal
+  Eigen::Vector3d m;       // c minus the centre point
+  Eigen::Matrix3d cov;     // weighted covariance (m^2), as fitted
+  double weight = 0;       // sum of the chi weights of the neighbours in the fit
 };
 
-// Weighted PCA of the neighbours of point i within h (eq. 2). `visit(g)` must call g(j) for a
-// superset of the neighbours (indices into d). Returns false if fewer than k_min remain.
+// Weighted PCA of the neighbours of point i within h (eq. 2), made robust by trimming: the fit
+// is repeated without the neighbours farther than kTrim standard deviations from its plane
+// (sqrt of lambda_3, at least the eigenvalue floor), up to kRefits times. A near outlier would
+// otherwise stretch the kernels of the surface points around it towards itself (its weight is
+// 1/20 of a typical neighbourhood's at 0.5 h), and they would vouch for it. `visit(g)` must call
+// g(j) for a superset of the neighbours (indices into d). Returns false if fewer than k_min
+// remain.
 template <class Visit>
-bool fit_kernel(const Points& d, std::size_t i, double h, int k_min, bool oriented, Visit&& visit,
-                Fit& out) {
+bool fit_kernel(const Points& d, std::size_t i, double h, int k_min, bool oriented,
+                double eigen_floor, Visit&& visit, Fit& out) {
+  constexpr double kTrim = 3.0;
+  constexpr int kRefits = 2;
   if (!(h > 0)) return false;
   const Eigen::Vector3d pi = d.p[i];
   const double h2 = h * h, inv_h2 = 1.0 / h2;
   const bool use_dir = oriented && d.has_v(i);
   const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
-  double s0 = 0, sx = 0, sy = 0, sz = 0, sxx = 0, syy = 0, szz = 0, sxy = 0, sxz = 0, syz = 0;
-  int count = 0;
+  struct Sample {
+    double x, y, z, t;
+  };
+  thread_local std::vector<Sample> nb;
+  nb.clear();
   visit([&](std::size_t j) {
     const Eigen::Vector3d dj = d.p[j] - pi;
     const double r2 = dj.squaredNorm();
@@ -148,30 +164,59 @@ bool fit_kernel(const Points& d, std::size_t i, double h, int k_min, bool orient
     double t = 1.0 - r2 * inv_h2;
     t *= t;
     t *= t;
-    ++count;
-    s0 += t;
-    sx += t * dj.x();
-    sy += t * dj.y();
-    sz += t * dj.z();
-    sxx += t * dj.x() * dj.x();
-    syy += t * dj.y() * dj.y();
-    szz += t * dj.z() * dj.z();
-    sxy += t * dj.x() * dj.y();
-    sxz += t * dj.x() * dj.z();
-    syz += t * dj.y() * dj.z();
+    nb.push_back({dj.x(), dj.y(), dj.z(), t});
   });
-  if (count < k_min || !(s0 > 0)) return false;
-  const Eigen::Vector3d m(sx / s0, sy / s0, sz / s0);
-  Eigen::Matrix3d c;
-  c(0, 0) = sxx / s0 - m.x() * m.x();
-  c(1, 1) = syy / s0 - m.y() * m.y();
-  c(2, 2) = szz / s0 - m.z() * m.z();
-  c(0, 1) = c(1, 0) = sxy / s0 - m.x() * m.y();
-  c(0, 2) = c(2, 0) = sxz / s0 - m.x() * m.z();
-  c(1, 2) = c(2, 1) = syz / s0 - m.y() * m.z();
-  // Solve in units of h^2 (well scaled); closed form, checked against the QR solver in tests.
+  const double floor2 = eigen_floor * eigen_floor;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-  es.computeDirect(c * inv_h2);
+  Eigen::Vector3d m;
+  Eigen::Matrix3d cov;
+  double s0_final = 0;
+  for (int round = 0;; ++round) {
+    double s0 = 0, sx = 0, sy = 0, sz = 0, sxx = 0, syy = 0, szz = 0, sxy = 0, sxz = 0, syz = 0;
+    for (const Sample& q : nb) {
+      const double t = q.t;
+      s0 += t;
+      sx += t * q.x;
+      sy += t * q.y;
+      sz += t * q.z;
+      sxx += t * q.x * q.x;
+      syy += t * q.y * q.y;
+      szz += t * q.z * q.z;
+      sxy += t * q.x * q.y;
+      sxz += t * q.x * q.z;
+      syz += t * q.y * q.z;
+    }
+    if (static_cast<int>(nb.size()) < k_min || !(s0 > 0)) return false;
+    s0_final = s0;
+    m = Eigen::Vector3d(sx / s0, sy / s0, sz / s0);
+    Eigen::Matrix3d c;
+    c(0, 0) = sxx / s0 - m.x() * m.x();
+    c(1, 1) = syy / s0 - m.y() * m.y();
+    c(2, 2) = szz / s0 - m.z() * m.z();
+    c(0, 1) = c(1, 0) = sxy / s0 - m.x() * m.y();
+    c(0, 2) = c(2, 0) = sxz / s0 - m.x() * m.z();
+    c(1, 2) = c(2, 1) = syz / s0 - m.y() * m.z();
+    // Solve in units of h^2 (well scaled); closed form, checked against the QR solver in tests.
+    cov = c * inv_h2;
+    es.computeDirect(cov);
+    if (round == kRefits) break;
+    // Trim (in units of h): residuals from the plane beyond kTrim standard deviations.
+    const Eigen::Vector3d n = es.eigenvectors().col(0);
+    const double var = std::max(es.eigenvalues()[0], floor2);
+    const double limit2 = kTrim * kTrim * var * h2;
+    const std::size_t before = nb.size();
+    nb.erase(std::remove_if(nb.begin(), nb.end(),
+                            [&](const Sample& q) {
+                              const double r = n.x() * (q.x - m.x()) + n.y() * (q.y - m.y()) +
+                                               n.z() * (q.z - m.z());
+                              return r * r > limit2;
+                            }),
+             nb.end());
+    if (nb.size() == before) break;
+  }
+  out.weight = s0_final;
+  out.m = m;
+  out.cov = cov * h2;
   out.c = pi + m;
   out.lambda = es.eigenvalues().cwiseMax(0.0) * h2;
   out.e = es.eigenvectors();
@@ -185,6 +230,10 @@ struct KernelSet {
   // Per slot one record of CandidateBuffer::kRecord floats: c, S^-1 (00 11 22, 2x 01 02 12;
   // 1/m^2), n, h_j^2, w_j.
   std::vector<float> rec;
+  // Per slot kLoo floats for the leave-one-out check of the off-surface test: m (c minus the
+  // centre point), the fit's weight, its covariance (00 11 22 01 02 12; m^2).
+  static constexpr std::size_t kLoo = 10;
+  std::vector<float> loo;
   std::size_t fitted = 0;  // points that got a kernel (including w = 0)
 };
 
@@ -194,6 +243,7 @@ struct Params {
   double cell = 0;              // grid cell (h, or median h_i)
   double gather_factor = 1.25;  // candidate radius / h
   std::size_t stride = 1;       // a kernel at every stride-th point (in d's order), weight x stride
+  bool loo = false;             // keep the fits for the off-surface test's leave-one-out check
 };
 
 // Builds the kernels of all points of d. `nref` receives each point's kernel normal (zero if it
@@ -208,6 +258,8 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
   constexpr std::size_t R = detail::CandidateBuffer::kRecord;
   std::vector<std::uint8_t> valid(n, 0);
   std::vector<float> rec(R * n, 0.0f);  // point order first
+  constexpr std::size_t LR = KernelSet::kLoo;
+  std::vector<float> loo(prm.loo ? LR * n : 0, 0.0f);
   nref.assign(n, Eigen::Vector3f::Zero());
   const double floor2 = o.eigen_floor * o.eigen_floor;
   const std::size_t stride = std::max<std::size_t>(1, prm.stride);
@@ -218,7 +270,7 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
         kSlots ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
     Fit fit;
     const bool ok = fit_kernel(
-        d, i, h, o.k_min, prm.oriented,
+        d, i, h, o.k_min, prm.oriented, o.eigen_floor,
         [&](auto&& g) {
           auto cb = [&](std::uint32_t j, float) { g(j); };
           if constexpr (kSlots)
@@ -245,6 +297,17 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
     for (int k = 0; k < 3; ++k) r[9 + k] = fit.n[k];
     r[12] = static_cast<float>(h2);
     r[13] = d.w_at(i) * static_cast<float>(stride);
+    if (prm.loo) {
+      float* l = &loo[KernelSet::kLoo * i];
+      for (int k = 0; k < 3; ++k) l[k] = static_cast<float>(fit.m[k]);
+      l[3] = static_cast<float>(fit.weight);
+      l[4] = static_cast<float>(fit.cov(0, 0));
+      l[5] = static_cast<float>(fit.cov(1, 1));
+      l[6] = static_cast<float>(fit.cov(2, 2));
+      l[7] = static_cast<float>(fit.cov(0, 1));
+      l[8] = static_cast<float>(fit.cov(0, 2));
+      l[9] = static_cast<float>(fit.cov(1, 2));
+    }
     valid[i] = 1;
   });
   point_index.reset();  // the point index is not needed any more (memory)
@@ -253,9 +316,11 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
   // Compact the valid kernels (in place), index their centres, then permute the records in
   // place into the index's slot order (cycle by cycle).
   std::size_t m = 0;
+  std::vector<std::uint32_t> owner;  // compacted kernel -> its point
   for (std::size_t i = 0; i < n; ++i) {
     if (!valid[i]) continue;
     if (m != i) std::copy_n(&rec[R * i], R, &rec[R * m]);
+    owner.push_back(static_cast<std::uint32_t>(i));
     ++m;
   }
   std::vector<std::uint8_t>().swap(valid);
@@ -266,6 +331,13 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
     cs[k] = Eigen::Vector3f(rec[R * k], rec[R * k + 1], rec[R * k + 2]);
   ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell * prm.gather_factor * 1.001);
   const auto& order = ks.index->order();
+  if (prm.loo) {
+    ks.loo.resize(LR * m);
+    for (std::size_t s = 0; s < m; ++s)
+      std::copy_n(&loo[LR * owner[order[s]]], LR, &ks.loo[LR * s]);
+    std::vector<float>().swap(loo);
+  }
+  std::vector<std::uint32_t>().swap(owner);
   std::vector<bool> done(m, false);
   std::array<float, R> tmp;
   for (std::size_t s0 = 0; s0 < m; ++s0) {
@@ -300,6 +372,9 @@ struct ProjectionContext {
   const FilterOptions* o = nullptr;
   float t2 = 9;
   float slab2 = 1;
+  float off_surface2 = 0;  // off-surface test threshold on e (0 = off)
+  double floor2 = 0;       // eigen_floor^2
+  bool oriented = false;
   double gather_factor = 1.25;
 };
 
@@ -332,6 +407,77 @@ void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
   buf.finish();
 }
 
+// The off-surface test at a point's input position xl (relative to the buffer's origin), after
+// detail::min_mahalanobis filled the e_j there: true if some candidate kernel puts it within
+// outlier_sigma standard deviations (e_j <= off_surface2, slab test passed) once both the point
+// and the kernel's own centre point are taken out of that kernel's fit. Without this, a point off
+// the surface would vouch for itself through every kernel its weight has pulled towards it: its
+// own (weight 1 at the centre), and, in pairs and clumps of outliers, each other's, which their
+// centres (weight 1 each) pull off the surface. The fit is downdated in closed form (weighted mean
+// and covariance without the points; a point is taken to be in the fit when it is within the
+// trimming band of the fitted plane) and floored as in build_kernels. A kernel that puts the
+// point within half the threshold distance and in whose fit the two have under 10 % of the
+// weight is taken as it is (the downdate cannot move it past the threshold).
+bool vouched(const ProjectionContext& ctx, detail::CandidateBuffer& buf, const Eigen::Vector3d& xl,
+             const Eigen::Vector3f& nref) {
+  using B = detail::CandidateBuffer;
+  constexpr std::size_t LR = KernelSet::kLoo;
+  const float* e = buf.f[B::kE].data();
+  for (std::size_t j = 0; j < buf.count; ++j) {
+    if (!(e[j] <= ctx.off_surface2)) continue;
+    const float* l = &ctx.ks->loo[LR * buf.slot[j]];
+    Eigen::Vector3d m(l[0], l[1], l[2]);
+    const Eigen::Vector3d c(buf.f[B::kCx][j], buf.f[B::kCy][j], buf.f[B::kCz][j]);
+    const Eigen::Vector3d d0 = xl - (c - m);  // from the kernel's centre point
+    const double h2 = buf.f[B::kH2][j];
+    Eigen::Matrix3d cov;
+    cov << l[4], l[7], l[8], l[7], l[5], l[9], l[8], l[9], l[6];
+    double w = l[3];
+    // In the fit: within h of the centre, the sensor normals agreeing, inside the trimming band.
+    const Eigen::Vector3f nj(buf.f[B::kNx][j], buf.f[B::kNy][j], buf.f[B::kNz][j]);
+    const bool normals_agree = !(ctx.oriented && nref.squaredNorm() > 0.5f) || nref.dot(nj) > 0.5f;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+    es.computeDirect(cov / h2);
+    const Eigen::Vector3d n0 = es.eigenvectors().col(0);
+    const double band2 = 9.0 * std::max(es.eigenvalues()[0], ctx.floor2) * h2;
+    auto weight_in_fit = [&](const Eigen::Vector3d& p) {
+      const double r2 = p.squaredNorm();
+      if (!(r2 < h2)) return 0.0;
+      const double res = n0.dot(p - m);
+      if (res * res > band2) return 0.0;
+      double t = 1.0 - r2 / h2;
+      t *= t;
+      return t * t;
+    };
+    const double t_point = normals_agree ? weight_in_fit(d0) : 0.0;
+    const bool is_centre = d0.squaredNorm() == 0.0;
+    const double t_centre = is_centre ? 0.0 : weight_in_fit(Eigen::Vector3d::Zero());
+    if (t_point + t_centre <= 0.1 * w && e[j] <= 0.25f * ctx.off_surface2) return true;
+    bool ok = true;
+    for (const auto& [p, t] :
+         {std::pair{d0, t_point}, std::pair{Eigen::Vector3d(0, 0, 0), t_centre}}) {
+      if (!(t > 0)) continue;
+      const double w1 = w - t;
+      if (!(w1 > 1e-3 * l[3])) {
+        ok = false;
+        break;
+      }
+      const Eigen::Vector3d delta = p - m;
+      m -= (t / w1) * delta;
+      cov = (w / w1) * cov - (t * w / (w1 * w1)) * delta * delta.transpose();
+      w = w1;
+    }
+    if (!ok) continue;
+    es.computeDirect(cov / h2);
+    const Eigen::Vector3d y = (d0 - m) / std::sqrt(h2);  // in units of h
+    const Eigen::Vector3d yl = es.eigenvectors().transpose() * y;
+    double e1 = 0;
+    for (int k = 0; k < 3; ++k) e1 += yl[k] * yl[k] / std::max(es.eigenvalues()[k], ctx.floor2);
+    if (e1 <= ctx.off_surface2 && yl[0] * yl[0] * h2 < buf.f[B::kSlab2][j]) return true;
+  }
+  return false;
+}
+
 // Projects x (in place) onto a maximum of L; eqs. 6-10 with the options' update rule.
 void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, Eigen::Vector3f nref,
                    float& L_out, std::uint8_t& iters_out, std::uint8_t& flags_out,
@@ -344,6 +490,20 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
   gather(ctx, of, h, buf);
+  if (ctx.off_surface2 > 0 && buf.count > 0) {
+    // Only points the kernels support at all (as the first iteration will check); the others
+    // are left to be flagged unsupported.
+    const Eigen::Vector3d xl = x - origin;
+    const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
+                         static_cast<float>(xl.z())};
+    if (detail::min_mahalanobis(buf, xf) < ctx.t2 && !vouched(ctx, buf, xl, nref)) {
+      flags_out = kMarkOffSurface;
+      iters_out = 0;
+      L_out = 0;
+      normal_out = nref;
+      return;
+    }
+  }
   int iters = 0;
   bool converged = false;
   Eigen::Vector3f nbar_out = nref;
@@ -408,13 +568,17 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
 }
 
 void project_all(const Points& d, const KernelSet& ks, const std::vector<Eigen::Vector3f>& nref,
-                 const FilterOptions& o, std::vector<Eigen::Vector3d>& x, Projected& out,
-                 const std::string& phase) {
+                 const FilterOptions& o, bool off_surface_test, bool oriented,
+                 std::vector<Eigen::Vector3d>& x, Projected& out, const std::string& phase) {
   ProjectionContext ctx;
   ctx.ks = &ks;
   ctx.o = &o;
   ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
   ctx.slab2 = static_cast<float>(o.slab * o.slab);
+  if (off_surface_test && !ks.loo.empty())
+    ctx.off_surface2 = static_cast<float>(o.outlier_sigma * o.outlier_sigma);
+  ctx.floor2 = o.eigen_floor * o.eigen_floor;
+  ctx.oriented = oriented;
   ctx.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
   const std::size_t n = x.size();
   out.L.assign(n, 0);
@@ -471,8 +635,6 @@ class CellMap {
   std::uint64_t mask_ = 0;
 };
 
-constexpr std::uint32_t kNone = 0xffffffffu;
-
 struct Clusters {
   std::vector<std::uint32_t> seed;        // data index of each representative
   std::vector<std::uint32_t> count;       // members
@@ -487,7 +649,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   cl.rep_of.assign(n, kNone);
   std::vector<std::uint32_t> cand;
   for (std::size_t i = 0; i < n; ++i)
-    if (!(pr.flags[i] & kFlagUnsupported)) cand.push_back(static_cast<std::uint32_t>(i));
+    if (!(pr.flags[i] & (kFlagUnsupported | kMarkOffSurface)))
+      cand.push_back(static_cast<std::uint32_t>(i));
   if (!(eps > 0)) {
     for (std::uint32_t i : cand) {
       cl.rep_of[i] = static_cast<std::uint32_t>(cl.seed.size());
@@ -709,7 +872,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
           Fit fit;
           const std::size_t i = sample[k];
           if (fit_kernel(
-                  in, i, hs, o.k_min, use_v,
+                  in, i, hs, o.k_min, use_v, o.eigen_floor,
                   [&](auto&& g) {
                     index->for_each_within(pf[i], static_cast<float>(hs * 1.0001),
                                            [&](std::uint32_t j, float) { g(j); });
@@ -793,7 +956,9 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   {
     t = Clock::now();
     std::vector<Eigen::Vector3f> nref;
+    prm.loo = o.outlier_sigma > 0;
     KernelSet ks = build_kernels<true>(d, index, prm, nref, "kernels");
+    prm.loo = false;
     x = std::move(d.p);
     st.kernels = ks.fitted;
     st.seconds_kernels += since(t);
@@ -805,7 +970,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         if (d.has_v(i)) nref[i] = d.v[i];
       std::vector<Eigen::Vector3f>().swap(d.v);
     }
-    project_all(d, ks, nref, o, x, pr, "projection");
+    project_all(d, ks, nref, o, true, use_v, x, pr, "projection");
     st.seconds_projection += since(t);
   }
   std::vector<Eigen::Vector3d>().swap(d.p);
@@ -814,7 +979,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     t = Clock::now();
     std::vector<std::uint32_t> sub;
     for (std::size_t i = 0; i < N; ++i)
-      if (!(pr.flags[i] & kFlagUnsupported)) sub.push_back(static_cast<std::uint32_t>(i));
+      if (!(pr.flags[i] & (kFlagUnsupported | kMarkOffSurface)))
+        sub.push_back(static_cast<std::uint32_t>(i));
     Points d2;
     d2.h = h;
     d2.p.resize(sub.size());
@@ -836,7 +1002,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     t = Clock::now();
     std::vector<Eigen::Vector3d> x2 = d2.p;
     Projected pr2;
-    project_all(d2, ks2, nref2, o, x2, pr2, "projection (pass 2)");
+    project_all(d2, ks2, nref2, o, false, use_v, x2, pr2, "projection (pass 2)");
     for (std::size_t k = 0; k < sub.size(); ++k) {
       const std::uint32_t i = sub[k];
       x[i] = x2[k];
@@ -855,7 +1021,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     std::size_t supported = 0;
     double sum = 0;
     for (std::size_t i = 0; i < N; ++i) {
-      if (pr.flags[i] & kFlagUnsupported) continue;
+      if (pr.flags[i] & (kFlagUnsupported | kMarkOffSurface)) continue;
       ++supported;
       ++hist[pr.iterations[i]];
       sum += pr.iterations[i];
@@ -1008,6 +1174,9 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       if (pr.flags[s] & kFlagUnsupported) {
         in_flag[src[s]] = kFlagUnsupported;
         ++st.unsupported;
+      } else if (pr.flags[s] & kMarkOffSurface) {
+        in_flag[src[s]] = kFlagOutlier;
+        ++st.off_surface;
       } else {
         const std::uint8_t f = rep_drop[cl.rep_of[s]];
         if (f) {
@@ -1073,6 +1242,7 @@ void validate(const FilterOptions& o) {
                "a finite number (< 0: default 0.25 x mean spacing, 0: off, > 0: metres)");
   check_real("tau", o.tau, 0, 1, false);
   check_real("likelihood_ratio", o.likelihood_ratio, 0, 1, false);
+  check_real("outlier_sigma", o.outlier_sigma, 0, 100, false);
   if (o.min_component_size > 1000000000ULL)
     bad_option("min_component_size", to_str(o.min_component_size),
                "0 (automatic) or a point count <= 1e9");

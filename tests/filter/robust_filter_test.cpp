@@ -34,9 +34,9 @@ void expect_accounting(const PointCloud& input, const FilterResult& r) {
   const double merged = std::accumulate(mc.begin(), mc.end(), 0.0);
   EXPECT_EQ(static_cast<std::size_t>(merged) + r.outliers.size(), input.size());
   EXPECT_EQ(r.stats.points_out, r.cloud.size());
-  EXPECT_EQ(
-      r.stats.unsupported + r.stats.low_density + r.stats.low_likelihood + r.stats.small_components,
-      r.outliers.size());
+  EXPECT_EQ(r.stats.unsupported + r.stats.off_surface + r.stats.low_density +
+                r.stats.low_likelihood + r.stats.small_components,
+            r.outliers.size());
   EXPECT_EQ(r.stats.removed(), r.outliers.size());
   std::set<double> seen;
   for (double s : attr(r.cloud, "source_index").values) EXPECT_TRUE(seen.insert(s).second);
@@ -206,9 +206,9 @@ TEST(RobustFilterTest, NoiseWiderThanTheNeighbourScaleRaisesH) {
     ASSERT_EQ(r1.cloud.positions[k], r.cloud.positions[k]) << k;
 }
 
-TEST(RobustFilterTest, OutliersCloserThanHAreRemovedOrProjected) {
+TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   // Outliers 0.3 h .. 0.9 h off a plane have surface kernels within reach and one of their own;
-  // without the likelihood-ratio test they stay where they are.
+  // without the off-surface and likelihood-ratio tests they stay where they are.
   PointCloud c = test::noisy_plane(20000, 1.0, 0.002, 32);  // seed 32
   c.normals.clear();
   const std::size_t inliers = c.size();
@@ -217,26 +217,35 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemovedOrProjected) {
   std::uniform_real_distribution<double> u(-0.4, 0.4), off(0.3, 0.9);
   for (int k = 0; k < 200; ++k)
     c.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng) * h_guess);
-  auto handled = [&](const FilterResult& r) {
+  auto removed = [&](const FilterResult& r) {
+    std::set<std::size_t> kept;
+    for (double s : attr(r.cloud, "source_index").values) kept.insert(static_cast<std::size_t>(s));
     std::size_t n = 0;
-    const auto& src = attr(r.cloud, "source_index").values;
-    std::set<std::size_t> kept_far;
-    for (std::size_t k = 0; k < r.cloud.size(); ++k)
-      if (src[k] >= inliers && std::abs(r.cloud.positions[k].z()) > 3 * 0.002)
-        kept_far.insert(static_cast<std::size_t>(src[k]));
-    for (std::size_t i = inliers; i < c.size(); ++i) n += kept_far.count(i) ? 0 : 1;
-    return n;  // removed, or moved onto the plane (within 3 sigma)
+    for (std::size_t i = inliers; i < c.size(); ++i) n += kept.count(i) ? 0 : 1;
+    return n;
   };
-  FilterOptions off_test = no_merge();
-  off_test.likelihood_ratio = 0;
-  const FilterResult without = robust_filter(c, off_test);
+  auto inliers_kept = [&](const FilterResult& r) {
+    std::size_t n = 0;
+    for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
+    return static_cast<double>(n);
+  };
+  FilterOptions neither = no_merge();
+  neither.likelihood_ratio = 0;
+  neither.outlier_sigma = 0;
+  EXPECT_LT(removed(robust_filter(c, neither)), 100u);  // the failure the tests exist for
+  FilterOptions off_surface_only = no_merge();
+  off_surface_only.likelihood_ratio = 0;
+  const FilterResult os = robust_filter(c, off_surface_only);
+  EXPECT_GE(removed(os), 188u);  // 94 % (measured 192)
+  EXPECT_GE(os.stats.off_surface, 170u);
+  EXPECT_GE(inliers_kept(os), 0.995 * inliers);
+  FilterOptions lr_only = no_merge();
+  lr_only.outlier_sigma = 0;
+  const FilterResult lr = robust_filter(c, lr_only);
+  EXPECT_GT(lr.stats.low_likelihood, 100u);
   const FilterResult with = robust_filter(c, no_merge());
-  EXPECT_LT(handled(without), 150u);  // the failure the test exists for
-  EXPECT_GE(handled(with), 196u);     // 98 %
-  std::size_t inliers_kept = 0;
-  for (double s : attr(with.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
-  EXPECT_GE(static_cast<double>(inliers_kept), 0.995 * inliers);
-  EXPECT_GT(with.stats.low_likelihood, 0u);
+  EXPECT_GE(removed(with), 194u);  // 97 % (measured 196)
+  EXPECT_GE(inliers_kept(with), 0.995 * inliers);
   expect_accounting(c, with);
 }
 

@@ -88,6 +88,13 @@ struct FilterOptions {
   //! are: their L is 0.03-0.2 of their surroundings', while inliers' L, rims included, stays above
   //! 0.3 of it (measured on the benchmark's shapes).
   double likelihood_ratio = 0.25;
+  //! Off-surface test, before the projection: drop an input point when no kernel around it puts
+  //! it within outlier_sigma standard deviations (Mahalanobis distance sqrt(e_j), slab test
+  //! included) once the point itself is taken out of that kernel's fit (leave-one-out), [0, 100];
+  //! 0 = off. Catches outliers closer than h to the surface, which the projection would otherwise
+  //! carry onto it; without the leave-one-out, a point's own kernel and those of outliers around
+  //! it, pulled towards it by its weight, would vouch for it.
+  double outlier_sigma = 4.0;
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
   bool use_sensor_normals = true;        //!< input normals (non-zero ones) replace PCA normals
@@ -103,8 +110,9 @@ void validate(const FilterOptions& options);
 
 //! Bits of the "flags" attribute.
 enum FilterFlags : std::uint8_t {
-  kFlagUnsupported = 1,   //!< no kernel supported the point (dropped)
-  kFlagOutlier = 2,       //!< removed by the density test or as a small component
+  kFlagUnsupported = 1,  //!< no kernel supported the point (dropped)
+  kFlagOutlier =
+      2,  //!< removed by the off-surface, density or likelihood test or as a small component
   kFlagNotConverged = 4,  //!< iteration cap reached
 };
 
@@ -113,11 +121,13 @@ struct FilterStats {
   std::size_t points_out = 0;
   std::size_t unsupported = 0;       //!< input points dropped: no support
   std::size_t low_density = 0;       //!< input points dropped by the density test
+  std::size_t off_surface = 0;       //!< input points dropped by the off-surface test
   std::size_t low_likelihood = 0;    //!< input points dropped by the likelihood-ratio test
   std::size_t small_components = 0;  //!< input points dropped with small components
-  //! Every input point dropped (unsupported, low density, low likelihood, small components).
+  //! Every input point dropped (unsupported, off surface, low density, low likelihood, small
+  //! components).
   std::size_t removed() const {
-    return unsupported + low_density + low_likelihood + small_components;
+    return unsupported + off_surface + low_density + low_likelihood + small_components;
   }
   std::size_t merged = 0;       //!< input points merged into another output point
   std::size_t kernels = 0;      //!< points that got a kernel (>= k_min neighbours)
