@@ -15,6 +15,7 @@ std::string FilterSettings::describe() const {
   std::ostringstream s;
   s << "defaults";
   if (adaptive) s << ", scale=adaptive k=" << k_adaptive;
+  if (kernel_stride > 0) s << ", kernel_stride=" << kernel_stride;
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
 }
@@ -39,6 +40,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
     options.scale = ScaleMode::kAdaptive;
     options.k_adaptive = settings.k_adaptive;
   }
+  options.kernel_stride = settings.kernel_stride;
   options.threads = settings.threads;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r = robust_filter(input, options);

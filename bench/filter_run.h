@@ -17,7 +17,8 @@ struct FilterSettings {
   bool merge = false;     //!< false: merge_eps = 0 (protocol mode, counts match the input)
   bool adaptive = false;  //!< ScaleMode::kAdaptive with k_adaptive
   int k_adaptive = 48;
-  int threads = 0;  //!< FilterOptions::threads (0 = all cores)
+  int kernel_stride = 0;  //!< FilterOptions::kernel_stride (0 = automatic)
+  int threads = 0;        //!< FilterOptions::threads (0 = all cores)
   std::string describe() const;
 };
 

@@ -508,6 +508,8 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
   bool converged = false;
   Eigen::Vector3f nbar_out = nref;
   const Eigen::Vector3d start = x;
+  double prev_mu = 0;
+  constexpr double kMaxRatio = 0.8;
   for (int k = 0; k < o.max_iterations; ++k) {
     if ((x - origin).norm() > regather) {
       of = x.cast<float>();
@@ -541,10 +543,19 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
     const double mu = m.dot(nb);
     // Both updates stop on the normal part |mu| (eq. 10 on the normal part, ALGORITHM.md 3):
     // the tangential part of m never dies out.
-    if (o.update == UpdateMode::kNormal)
-      x -= mu * nb;
-    else
+    if (o.update == UpdateMode::kNormal) {
+      // The mean shift converges linearly: along the normal, successive steps shrink by a
+      // nearly constant ratio r. When two steps agree in sign with r < 0.8, the step is
+      // extrapolated to the limit of the geometric series, mu / (1 - r) (Aitken); the stopping
+      // test still uses the measured mu, so the fixed point and the tolerance are unchanged.
+      double step = mu;
+      const double r = prev_mu != 0 ? mu / prev_mu : 0.0;
+      if (r > 0 && r < kMaxRatio) step = mu / (1 - r);
+      x -= step * nb;
+      prev_mu = mu;
+    } else {
       x -= m;
+    }
     const double step_len = std::abs(mu);
     ++iters;
     nbar_out = nb.cast<float>();
@@ -831,7 +842,10 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     }
     if (!(r_est > 0)) r_est = fallback_h;
     const float r_max = static_cast<float>(2 * diag + fallback_h);
-    index = std::make_unique<NeighborIndex>(pf, r_est * 1.6);
+    // kAdaptive queries every point: a finer grid (the query box then spans about 5 cells a side)
+    // scans 3.7x fewer points on a surface and 7x fewer in a noise band thicker than r.
+    index =
+        std::make_unique<NeighborIndex>(pf, r_est * (o.scale == ScaleMode::kAdaptive ? 1.2 : 1.6));
     // Exact distance to the K-th other point: all points within r, grown until K + 1 found.
     auto kth = [&](const Eigen::Vector3f& q) {
       thread_local std::vector<float> d2s;
@@ -865,12 +879,15 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       // (0.46 sigma at hs = 2.4 sigma, measured), so h = max(h0, noise_factor sigma(h)) is
       // solved as a fixed point from hs = h0 upwards: hs grows while noise_factor sigma(hs)
       // exceeds it, and the estimate grows with it.
+      // Over every 4th sampled point of large clouds (2,500 fits per step; the median moves by
+      // about 1 %): each step's radius grows with the noise.
+      const std::size_t sig_step = M >= 4000 ? 4 : 1;
       auto sigma_at = [&](double hs) {
-        std::vector<double> sig(M, -1.0);
+        std::vector<double> sig(M / sig_step, -1.0);
         in.h = hs;
-        parallel_each(M, [&](std::size_t k) {
+        parallel_each(sig.size(), [&](std::size_t k) {
           Fit fit;
-          const std::size_t i = sample[k];
+          const std::size_t i = sample[k * sig_step];
           if (fit_kernel(
                   in, i, hs, o.k_min, use_v, o.eigen_floor,
                   [&](auto&& g) {
@@ -895,8 +912,11 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       if (!(index->cell() >= h * 1.001 && index->cell() <= h * 1.7)) index.reset();
     } else {
       std::vector<float> hi(N);
-      parallel_each_reporting(N, o, "scale",
-                              [&](std::size_t i) { hi[i] = static_cast<float>(kth(pf[i])); });
+      // In grid order: neighbouring queries touch the same cells (cache).
+      const std::vector<std::uint32_t>& ord = index->order();
+      parallel_each_reporting(N, o, "scale", [&](std::size_t s) {
+        hi[ord[s]] = static_cast<float>(kth(index->slot_point(s)));
+      });
       in.hi = std::move(hi);
       h = median_of(in.hi);
       if (!(h > 0)) h = fallback_h;
@@ -950,6 +970,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   else if (o.scale == ScaleMode::kAuto && st.h0 > 0)  // about K_h kernels within h
     prm.stride =
         static_cast<std::size_t>(std::clamp(std::floor((h / st.h0) * (h / st.h0)), 1.0, 64.0));
+  else if (o.scale == ScaleMode::kAdaptive)  // the same: k_adaptive points within h_i
+    prm.stride = static_cast<std::size_t>(std::clamp(o.k_adaptive / o.k_h, 1, 64));
   st.kernel_stride = static_cast<int>(prm.stride);
   std::vector<Eigen::Vector3d> x;  // projected positions (data order), initially d.p
   Projected pr;
@@ -1075,22 +1097,37 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       // dropped 0.5 % of a clean square's points, all within h of its border; the lower
       // quartile 0.16 %, with the same outliers found).
       const bool by_l = o.likelihood_ratio > 0;
-      const std::uint32_t l_stride = static_cast<std::uint32_t>(prm.stride);
       std::vector<float> lik(by_l ? R : 0);
       if (by_l) parallel_each(R, [&](std::size_t s) { lik[s] = pr.L[cl.seed[rord[s]]]; });
+      // When the kernels are thinned (h raised for the noise), so is this pass: both sums run
+      // over every stride-th output point (slots are in grid order: an even subsample, about
+      // K_h of them within h instead of K_h stride), and rho is scaled back by the stride. With
+      // a stride of 1 both are exact.
+      const std::size_t stride = prm.stride;
+      std::unique_ptr<NeighborIndex> thinned;
+      if (stride > 1) {
+        std::vector<Eigen::Vector3f> sub((R + stride - 1) / stride);
+        parallel_each(sub.size(), [&](std::size_t k) { sub[k] = ridx.slot_point(k * stride); });
+        thinned = std::make_unique<NeighborIndex>(std::move(sub), prm.cell * 1.001);
+      }
       std::vector<double> rho(R, 0.0);
       std::vector<float> l_ref(by_l ? R : 0, 0.0f);
       parallel_each(R, [&](std::size_t s) {
         thread_local std::vector<float> around;
         around.clear();
         std::uint64_t sum = 0;
-        ridx.for_each_slot_within(ridx.slot_point(s), hs[s], [&](std::uint32_t q, float) {
+        auto visit = [&](std::uint32_t q) {
           sum += cnt[q];
-          // The quartile from an even subsample (slots are in grid order) when the kernels
-          // are thinned too: about K_h values either way.
-          if (by_l && q % l_stride == 0) around.push_back(lik[q]);
-        });
-        rho[s] = static_cast<double>(sum);
+          if (by_l) around.push_back(lik[q]);
+        };
+        if (thinned)
+          thinned->for_each_within(ridx.slot_point(s), hs[s], [&](std::uint32_t k, float) {
+            visit(static_cast<std::uint32_t>(k * stride));
+          });
+        else
+          ridx.for_each_slot_within(ridx.slot_point(s), hs[s],
+                                    [&](std::uint32_t q, float) { visit(q); });
+        rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
         if (by_l) {
           if (around.empty()) around.push_back(lik[s]);  // s itself is off the subsample
           const auto quartile = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 4);

@@ -68,8 +68,9 @@ struct FilterOptions {
   double noise_factor = 6.0;
   //! Kernels at every kernel_stride-th point (spatially even, in grid order), their weights
   //! multiplied by the stride, [0, 64]. 1: a kernel at every point (the paper). 0 (automatic):
-  //! 1, unless kAuto raised h above h0 for the noise; then floor((h / h0)^2), so that a
-  //! neighbourhood still holds about K_h kernels instead of K_h (h / h0)^2.
+  //! 1, unless the neighbourhoods hold more than K_h points: when kAuto raised h above h0 for
+  //! the noise, floor((h / h0)^2), so that a neighbourhood still holds about K_h kernels instead
+  //! of K_h (h / h0)^2; with kAdaptive, floor(k_adaptive / K_h) (2 at k_adaptive = 250).
   int kernel_stride = 0;
   int k_adaptive = 48;            //!< neighbour rank for per-point h_i (kAdaptive), [2, 1000]
   int k_min = 8;                  //!< fewer neighbours within h_i: no kernel, [3, 1000]
