@@ -436,6 +436,12 @@ bool vouched(const ProjectionContext& ctx, detail::CandidateBuffer& buf, const E
     // In the fit: within h of the centre, the sensor normals agreeing, inside the trimming band.
     const Eigen::Vector3f nj(buf.f[B::kNx][j], buf.f[B::kNy][j], buf.f[B::kNz][j]);
     const bool normals_agree = !(ctx.oriented && nref.squaredNorm() > 0.5f) || nref.dot(nj) > 0.5f;
+    // Upper bounds of the two weights (the band test below can only lower them) decide the
+    // shortcut without an eigen-decomposition.
+    const double r2 = d0.squaredNorm();
+    const bool is_centre = r2 == 0.0;
+    const double t_bound = (normals_agree && r2 < h2 ? 1.0 : 0.0) + (is_centre ? 0.0 : 1.0);
+    if (t_bound <= 0.1 * w && e[j] <= 0.25f * ctx.off_surface2) return true;
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
     es.computeDirect(cov / h2);
     const Eigen::Vector3d n0 = es.eigenvectors().col(0);
@@ -450,7 +456,6 @@ bool vouched(const ProjectionContext& ctx, detail::CandidateBuffer& buf, const E
       return t * t;
     };
     const double t_point = normals_agree ? weight_in_fit(d0) : 0.0;
-    const bool is_centre = d0.squaredNorm() == 0.0;
     const double t_centre = is_centre ? 0.0 : weight_in_fit(Eigen::Vector3d::Zero());
     if (t_point + t_centre <= 0.1 * w && e[j] <= 0.25f * ctx.off_surface2) return true;
     bool ok = true;
@@ -912,10 +917,50 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       if (!(index->cell() >= h * 1.001 && index->cell() <= h * 1.7)) index.reset();
     } else {
       std::vector<float> hi(N);
-      // In grid order: neighbouring queries touch the same cells (cache).
+      // Cell by cell: the points of the 27 cells around a cell are copied once into a compact
+      // buffer, and each point of the cell takes its distances to them there (vectorised). A
+      // point with fewer than K + 1 within the start radius falls back to kth().
       const std::vector<std::uint32_t>& ord = index->order();
-      parallel_each_reporting(N, o, "scale", [&](std::size_t s) {
-        hi[ord[s]] = static_cast<float>(kth(index->slot_point(s)));
+      const float r0 = std::min(static_cast<float>(r_est * 1.15), index->max_adjacent_radius());
+      const float r02 = r0 * r0;
+      if (index->cell_count() == 0)  // no grid (cannot happen with a cell > 0; kept safe)
+        parallel_each(N, [&](std::size_t i) { hi[i] = static_cast<float>(kth(pf[i])); });
+      parallel_each_reporting(index->cell_count(), o, "scale", [&](std::size_t c) {
+        thread_local std::vector<float> bx, by, bz, d2, hit;
+        bx.clear();
+        by.clear();
+        bz.clear();
+        index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) {
+          for (std::uint32_t s = b; s < e; ++s) {
+            const Eigen::Vector3f& p = index->slot_point(s);
+            bx.push_back(p.x());
+            by.push_back(p.y());
+            bz.push_back(p.z());
+          }
+        });
+        const std::size_t m = bx.size();
+        d2.resize(m);
+        hit.resize(m);
+        for (std::uint32_t s = index->cell_begin(c); s < index->cell_begin(c + 1); ++s) {
+          const Eigen::Vector3f& q = index->slot_point(s);
+          const float qx = q.x(), qy = q.y(), qz = q.z();
+          for (std::size_t j = 0; j < m; ++j) {
+            const float dx = bx[j] - qx, dy = by[j] - qy, dz = bz[j] - qz;
+            d2[j] = dx * dx + dy * dy + dz * dz;
+          }
+          std::size_t n = 0;
+          for (std::size_t j = 0; j < m; ++j) {
+            hit[n] = d2[j];
+            n += d2[j] < r02 ? 1 : 0;
+          }
+          if (n >= kk) {
+            std::nth_element(hit.begin(), hit.begin() + static_cast<std::ptrdiff_t>(kk - 1),
+                             hit.begin() + static_cast<std::ptrdiff_t>(n));
+            hi[ord[s]] = std::sqrt(hit[kk - 1]);
+          } else {
+            hi[ord[s]] = static_cast<float>(kth(q));
+          }
+        }
       });
       in.hi = std::move(hi);
       h = median_of(in.hi);
@@ -1173,11 +1218,17 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   }
 
   // ----- outputs -----------------------------------------------------------------------------
+  // Output points in the input order of their seeds (seeds are distinct input points).
   std::vector<std::uint32_t> kept;
-  for (std::size_t r = 0; r < R; ++r)
-    if (!rep_drop[r]) kept.push_back(static_cast<std::uint32_t>(r));
-  std::sort(kept.begin(), kept.end(),
-            [&](std::uint32_t a, std::uint32_t b) { return src[cl.seed[a]] < src[cl.seed[b]]; });
+  {
+    std::vector<std::uint32_t> rep_at(N, kNone);
+    parallel_each(R, [&](std::size_t r) {
+      if (!rep_drop[r]) rep_at[src[cl.seed[r]]] = static_cast<std::uint32_t>(r);
+    });
+    kept.reserve(R);
+    for (std::uint32_t r : rep_at)
+      if (r != kNone) kept.push_back(r);
+  }
   {
     std::vector<std::size_t> seeds(kept.size());
     for (std::size_t k = 0; k < kept.size(); ++k) seeds[k] = src[cl.seed[kept[k]]];
@@ -1187,7 +1238,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     out.normals.resize(kept.size());
     std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
         si(kept.size());
-    for (std::size_t k = 0; k < kept.size(); ++k) {
+    parallel_each(kept.size(), [&](std::size_t k) {
       const std::uint32_t r = kept[k], s = cl.seed[r];
       out.positions[k] = cl.position[r] + origin;
       out.normals[k] = pr.normal[s];
@@ -1196,7 +1247,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       fl[k] = pr.flags[s] & kFlagNotConverged;
       mc[k] = cl.count[r];
       si[k] = src[s];
-    }
+    });
     out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
     out.set_attribute("iterations", AttributeType::kUInt8, std::move(it));
     out.set_attribute("flags", AttributeType::kUInt8, std::move(fl));

@@ -57,6 +57,19 @@ class NeighborIndex {
   //! Grid slot of original index i.
   std::uint32_t slot_of(std::uint32_t i) const { return inv_[i]; }
 
+  //! Occupied grid cells (0 without a grid). Cell c holds the slots [cell_begin(c),
+  //! cell_begin(c + 1)); cells are in grid order.
+  std::size_t cell_count() const { return grid_ ? cell_begin_.size() - 1 : 0; }
+  std::uint32_t cell_begin(std::size_t c) const { return cell_begin_[c]; }
+  //! Calls f(begin_slot, end_slot) for the occupied cells among the 27 around occupied cell c
+  //! (c included): they hold every point within max_adjacent_radius() of a point of c.
+  template <class F>
+  void for_each_adjacent_run(std::size_t c, F&& f) const {
+    for (std::uint32_t k = adj_begin_[c], ke = adj_begin_[c + 1]; k < ke; ++k)
+      f(cell_begin_[adj_[k]], cell_begin_[adj_[k] + 1]);
+  }
+  float max_adjacent_radius() const { return cell_f_; }
+
   //! The k nearest points to q (including a point equal to q), as (squared distance, index),
   //! sorted by distance then index. Fewer if the set has fewer points. Thread-safe (const).
   void knn(const Eigen::Vector3f& q, std::size_t k,
