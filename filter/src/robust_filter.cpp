@@ -32,6 +32,10 @@ constexpr std::size_t kGrain = 256;
 constexpr std::uint32_t kNone = 0xffffffffu;
 // Internal mark in Projected::flags: dropped before projection by the off-surface test.
 constexpr std::uint8_t kMarkOffSurface = 32;
+// Internal mark in Projected::flags: dropped before projection, its own kernel's support being
+// below tau x the median (counted as low density).
+constexpr std::uint8_t kMarkSparse = 64;
+constexpr std::uint8_t kMarkDropped = kMarkOffSurface | kMarkSparse;
 
 // Runs f(i) for i in [0, n) in parallel. Per-index work is independent, so the result does not
 // depend on how TBB splits the range.
@@ -244,6 +248,7 @@ struct Params {
   double gather_factor = 1.25;  // candidate radius / h
   std::size_t stride = 1;       // a kernel at every stride-th point (in d's order), weight x stride
   bool loo = false;             // keep the fits for the off-surface test's leave-one-out check
+  std::vector<float>* support = nullptr;  // per point: its kernel's support without itself
 };
 
 // Builds the kernels of all points of d. `nref` receives each point's kernel normal (zero if it
@@ -281,6 +286,7 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
         fit);
     if (!ok) return;
     nref[i] = fit.n;
+    if (prm.support) (*prm.support)[i] = static_cast<float>(fit.weight - 1.0);
     if (!(d.w_at(i) > 0)) return;  // a zero-weight kernel contributes nothing
     const double h2 = h * h;
     Eigen::Vector3d inv;
@@ -585,7 +591,8 @@ void project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h, E
 
 void project_all(const Points& d, const KernelSet& ks, const std::vector<Eigen::Vector3f>& nref,
                  const FilterOptions& o, bool off_surface_test, bool oriented,
-                 std::vector<Eigen::Vector3d>& x, Projected& out, const std::string& phase) {
+                 const std::vector<std::uint8_t>& pre, std::vector<Eigen::Vector3d>& x,
+                 Projected& out, const std::string& phase) {
   ProjectionContext ctx;
   ctx.ks = &ks;
   ctx.o = &o;
@@ -604,6 +611,11 @@ void project_all(const Points& d, const KernelSet& ks, const std::vector<Eigen::
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     // Sensor normals are the reference orientation when present, else the own kernel's normal.
     const Eigen::Vector3f ref = d.has_v(i) ? d.v[i] : nref[i];
+    if (pre[i]) {  // dropped before projection
+      out.flags[i] = pre[i];
+      out.normal[i] = ref;
+      return;
+    }
     project_point(ctx, x[i], d.hi_at(i), ref, out.L[i], out.iterations[i], out.flags[i],
                   out.normal[i]);
   });
@@ -665,7 +677,7 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   cl.rep_of.assign(n, kNone);
   std::vector<std::uint32_t> cand;
   for (std::size_t i = 0; i < n; ++i)
-    if (!(pr.flags[i] & (kFlagUnsupported | kMarkOffSurface)))
+    if (!(pr.flags[i] & (kFlagUnsupported | kMarkDropped)))
       cand.push_back(static_cast<std::uint32_t>(i));
   if (!(eps > 0)) {
     for (std::uint32_t i : cand) {
@@ -1024,8 +1036,11 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     t = Clock::now();
     std::vector<Eigen::Vector3f> nref;
     prm.loo = o.outlier_sigma > 0;
+    std::vector<float> support(o.tau > 0 ? N : 0, -1.0f);
+    if (!support.empty()) prm.support = &support;
     KernelSet ks = build_kernels<true>(d, index, prm, nref, "kernels");
     prm.loo = false;
+    prm.support = nullptr;
     x = std::move(d.p);
     st.kernels = ks.fitted;
     st.seconds_kernels += since(t);
@@ -1037,7 +1052,26 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         if (d.has_v(i)) nref[i] = d.v[i];
       std::vector<Eigen::Vector3f>().swap(d.v);
     }
-    project_all(d, ks, nref, o, true, use_v, x, pr, "projection");
+    // Density test on the input, before projection: a point whose own kernel's support (the
+    // chi-weighted count of its neighbours, itself left out) is below tau x the median over
+    // the kernels is dropped as low density. The chi weights concentrate that count within
+    // about h / 2, where a surface holds a quarter of its h-ball but volumetric clutter only an
+    // eighth: uniform clutter around a 10k-point shape (5 %) has 7-15 points in an h-ball,
+    // 0.07-0.15 of the surface's, and passes the spec's test on the output; its support is
+    // under 0.1 of the median. Points without a kernel of their own (kernel stride) are left to
+    // the output test.
+    std::vector<std::uint8_t> pre(N, 0);
+    if (!support.empty()) {
+      std::vector<float> v;
+      for (float f : support)
+        if (f >= 0) v.push_back(f);
+      const double limit = o.tau * static_cast<double>(median_of(std::move(v)));
+      parallel_each(N, [&](std::size_t i) {
+        if (support[i] >= 0 && support[i] < limit) pre[i] = kMarkSparse;
+      });
+      std::vector<float>().swap(support);
+    }
+    project_all(d, ks, nref, o, true, use_v, pre, x, pr, "projection");
     st.seconds_projection += since(t);
   }
   std::vector<Eigen::Vector3d>().swap(d.p);
@@ -1046,7 +1080,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     t = Clock::now();
     std::vector<std::uint32_t> sub;
     for (std::size_t i = 0; i < N; ++i)
-      if (!(pr.flags[i] & (kFlagUnsupported | kMarkOffSurface)))
+      if (!(pr.flags[i] & (kFlagUnsupported | kMarkDropped)))
         sub.push_back(static_cast<std::uint32_t>(i));
     Points d2;
     d2.h = h;
@@ -1069,7 +1103,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     t = Clock::now();
     std::vector<Eigen::Vector3d> x2 = d2.p;
     Projected pr2;
-    project_all(d2, ks2, nref2, o, false, use_v, x2, pr2, "projection (pass 2)");
+    project_all(d2, ks2, nref2, o, false, use_v, std::vector<std::uint8_t>(d2.p.size(), 0), x2, pr2,
+                "projection (pass 2)");
     for (std::size_t k = 0; k < sub.size(); ++k) {
       const std::uint32_t i = sub[k];
       x[i] = x2[k];
@@ -1088,7 +1123,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     std::size_t supported = 0;
     double sum = 0;
     for (std::size_t i = 0; i < N; ++i) {
-      if (pr.flags[i] & (kFlagUnsupported | kMarkOffSurface)) continue;
+      if (pr.flags[i] & (kFlagUnsupported | kMarkDropped)) continue;
       ++supported;
       ++hist[pr.iterations[i]];
       sum += pr.iterations[i];
@@ -1265,6 +1300,9 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       } else if (pr.flags[s] & kMarkOffSurface) {
         in_flag[src[s]] = kFlagOutlier;
         ++st.off_surface;
+      } else if (pr.flags[s] & kMarkSparse) {
+        in_flag[src[s]] = kFlagOutlier;
+        ++st.low_density;
       } else {
         const std::uint8_t f = rep_drop[cl.rep_of[s]];
         if (f) {

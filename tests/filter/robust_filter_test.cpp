@@ -229,24 +229,59 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
     for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
     return static_cast<double>(n);
   };
+  // Each test alone, the density tests (tau, which also see these sparse points) off.
   FilterOptions neither = no_merge();
   neither.likelihood_ratio = 0;
   neither.outlier_sigma = 0;
+  neither.tau = 0;
   EXPECT_LT(removed(robust_filter(c, neither)), 100u);  // the failure the tests exist for
   FilterOptions off_surface_only = no_merge();
   off_surface_only.likelihood_ratio = 0;
+  off_surface_only.tau = 0;
   const FilterResult os = robust_filter(c, off_surface_only);
   EXPECT_GE(removed(os), 188u);  // 94 % (measured 192)
   EXPECT_GE(os.stats.off_surface, 170u);
   EXPECT_GE(inliers_kept(os), 0.995 * inliers);
   FilterOptions lr_only = no_merge();
   lr_only.outlier_sigma = 0;
+  lr_only.tau = 0;
   const FilterResult lr = robust_filter(c, lr_only);
   EXPECT_GT(lr.stats.low_likelihood, 100u);
   const FilterResult with = robust_filter(c, no_merge());
   EXPECT_GE(removed(with), 194u);  // 97 % (measured 196)
   EXPECT_GE(inliers_kept(with), 0.995 * inliers);
   expect_accounting(c, with);
+}
+
+TEST(RobustFilterTest, VolumetricClutterIsRemovedByTheSupportDensityTest) {
+  // Dense uniform clutter (20 %) in a slab around a noisy plane, farther than 0.05 from it:
+  // about 7 clutter points in an h-ball against the plane's 96, so the density test on the
+  // output points keeps some of them (they collapse into clumps); their own kernels'
+  // chi-weighted support is far below the plane's.
+  PointCloud c = test::noisy_plane(10000, 1.0, 0.005, 41);  // seed 41
+  c.normals.clear();
+  const std::size_t inliers = c.size();
+  std::mt19937 rng(42);  // seed 42
+  std::uniform_real_distribution<double> u(-0.5, 0.5), z(-0.15, 0.15);
+  while (c.size() < inliers + 2000) {
+    const Eigen::Vector3d p(u(rng), u(rng), z(rng));
+    if (std::abs(p.z()) > 0.05) c.positions.push_back(p);
+  }
+  auto removed = [&](const FilterResult& r) {
+    std::set<std::size_t> kept;
+    for (double s : attr(r.cloud, "source_index").values) kept.insert(static_cast<std::size_t>(s));
+    std::size_t n = 0;
+    for (std::size_t i = inliers; i < c.size(); ++i) n += kept.count(i) ? 0 : 1;
+    return n;
+  };
+  const FilterResult r = robust_filter(c, no_merge());
+  std::size_t inliers_kept = 0;
+  for (double s : attr(r.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
+  // Measured: all 2000 removed, 331 as low density; without the support test 1993 and 217.
+  EXPECT_EQ(removed(r), 2000u);
+  EXPECT_GE(r.stats.low_density, 300u);
+  EXPECT_GE(static_cast<double>(inliers_kept), 0.995 * inliers);
+  expect_accounting(c, r);
 }
 
 TEST(RobustFilterTest, SheetsAGapOfHApartStayApartAndCloserOnesMerge) {

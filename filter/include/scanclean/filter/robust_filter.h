@@ -82,7 +82,11 @@ struct FilterOptions {
   UpdateMode update = UpdateMode::kNormal;
   int passes = 1;         //!< 2 = rebuild kernels from the first output and project again, [1, 2]
   double merge_eps = -1;  //!< < 0: 0.25 x mean spacing; 0: no merging; > 0: metres
-  double tau = 0.1;       //!< drop points whose density < tau x median density, [0, 1]
+  //! Density threshold, [0, 1]; 0 = off. Drops output points whose density rho (input points
+  //! within h) is below tau x the median, and, before projection, input points whose own
+  //! kernel's chi-weighted support (itself left out) is below tau x the median over the kernels
+  //! (uniform clutter collapses into dense clumps under projection, but not before).
+  double tau = 0.1;
   //! Drop points whose likelihood L < likelihood_ratio x the lower quartile of L over the
   //! output points within h, [0, 1]; 0 = off. Catches outliers closer than h to the surface, which
   //! the surface kernels (or their own, stretched towards them by their own weight) keep where they
