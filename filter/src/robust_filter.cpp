@@ -261,13 +261,14 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
   const std::size_t n = d.p.size();
   const FilterOptions& o = *prm.o;
   constexpr std::size_t R = detail::CandidateBuffer::kRecord;
-  std::vector<std::uint8_t> valid(n, 0);
-  std::vector<float> rec(R * n, 0.0f);  // point order first
+  const std::size_t stride = std::max<std::size_t>(1, prm.stride);
+  const std::size_t nk = (n + stride - 1) / stride;  // kernel candidates: i = k stride
+  std::vector<std::uint8_t> valid(nk, 0);
+  std::vector<float> rec(R * nk, 0.0f);  // candidate order first
   constexpr std::size_t LR = KernelSet::kLoo;
-  std::vector<float> loo(prm.loo ? LR * n : 0, 0.0f);
+  std::vector<float> loo(prm.loo ? LR * nk : 0, 0.0f);
   nref.assign(n, Eigen::Vector3f::Zero());
   const double floor2 = o.eigen_floor * o.eigen_floor;
-  const std::size_t stride = std::max<std::size_t>(1, prm.stride);
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     if (i % stride != 0) return;  // d is in grid order: a spatially even subsample
     const double h = d.hi_at(i);
@@ -292,7 +293,8 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
     Eigen::Vector3d inv;
     for (int k = 0; k < 3; ++k) inv[k] = 1.0 / std::max(fit.lambda[k], floor2 * h2);
     const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
-    float* r = &rec[R * i];
+    const std::size_t k = i / stride;
+    float* r = &rec[R * k];
     for (int k = 0; k < 3; ++k) r[k] = static_cast<float>(fit.c[k]);
     r[3] = static_cast<float>(s_inv(0, 0));
     r[4] = static_cast<float>(s_inv(1, 1));
@@ -304,7 +306,7 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
     r[12] = static_cast<float>(h2);
     r[13] = d.w_at(i) * static_cast<float>(stride);
     if (prm.loo) {
-      float* l = &loo[KernelSet::kLoo * i];
+      float* l = &loo[KernelSet::kLoo * k];
       for (int k = 0; k < 3; ++k) l[k] = static_cast<float>(fit.m[k]);
       l[3] = static_cast<float>(fit.weight);
       l[4] = static_cast<float>(fit.cov(0, 0));
@@ -314,54 +316,54 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
       l[8] = static_cast<float>(fit.cov(0, 2));
       l[9] = static_cast<float>(fit.cov(1, 2));
     }
-    valid[i] = 1;
+    valid[k] = 1;
   });
   point_index.reset();  // the point index is not needed any more (memory)
   KernelSet ks;
   for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
   // Compact the valid kernels (in place), index their centres, then permute the records in
   // place into the index's slot order (cycle by cycle).
+  // In place (no second copy: memory), the fits' data along with the records.
   std::size_t m = 0;
-  std::vector<std::uint32_t> owner;  // compacted kernel -> its point
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!valid[i]) continue;
-    if (m != i) std::copy_n(&rec[R * i], R, &rec[R * m]);
-    owner.push_back(static_cast<std::uint32_t>(i));
+  for (std::size_t k = 0; k < nk; ++k) {
+    if (!valid[k]) continue;
+    if (m != k) {
+      std::copy_n(&rec[R * k], R, &rec[R * m]);
+      if (prm.loo) std::copy_n(&loo[LR * k], LR, &loo[LR * m]);
+    }
     ++m;
   }
   std::vector<std::uint8_t>().swap(valid);
   rec.resize(R * m);
-  rec.shrink_to_fit();
+  if (prm.loo) loo.resize(LR * m);
   std::vector<Eigen::Vector3f> cs(m);
   for (std::size_t k = 0; k < m; ++k)
     cs[k] = Eigen::Vector3f(rec[R * k], rec[R * k + 1], rec[R * k + 2]);
   ks.index = std::make_unique<NeighborIndex>(std::move(cs), prm.cell * prm.gather_factor * 1.001);
   const auto& order = ks.index->order();
-  if (prm.loo) {
-    ks.loo.resize(LR * m);
-    for (std::size_t s = 0; s < m; ++s)
-      std::copy_n(&loo[LR * owner[order[s]]], LR, &ks.loo[LR * s]);
-    std::vector<float>().swap(loo);
-  }
-  std::vector<std::uint32_t>().swap(owner);
   std::vector<bool> done(m, false);
   std::array<float, R> tmp;
+  std::array<float, LR> tmp_loo;
   for (std::size_t s0 = 0; s0 < m; ++s0) {
     if (done[s0]) continue;
     std::copy_n(&rec[R * s0], R, tmp.begin());
+    if (prm.loo) std::copy_n(&loo[LR * s0], LR, tmp_loo.begin());
     std::size_t s = s0;
     while (true) {
       done[s] = true;
       const std::size_t from = order[s];
       if (from == s0) {
         std::copy_n(tmp.begin(), R, &rec[R * s]);
+        if (prm.loo) std::copy_n(tmp_loo.begin(), LR, &loo[LR * s]);
         break;
       }
       std::copy_n(&rec[R * from], R, &rec[R * s]);
+      if (prm.loo) std::copy_n(&loo[LR * from], LR, &loo[LR * s]);
       s = from;
     }
   }
   ks.rec = std::move(rec);
+  ks.loo = std::move(loo);
   return ks;
 }
 

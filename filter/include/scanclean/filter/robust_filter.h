@@ -21,6 +21,12 @@
 //!    members' positions.
 //!  - Density test: rho counts input points (member counts); the component-size test also
 //!    counts input points.
+//!  - Kernels are fitted robustly: the weighted PCA is repeated without the neighbours beyond
+//!    3 standard deviations of its plane (at most twice).
+//!  - Before the projection, points are dropped by the off-surface test (outlier_sigma) and by
+//!    the density test on their own kernel's support (tau); see the options.
+//!  - The normal update is extrapolated (Aitken) when successive steps shrink by a steady ratio
+//!    r < 0.8; the stopping test uses the measured step, so the fixed points are unchanged.
 //!
 //! Known limits: two sheets closer than about 0.5 h collapse into one (at gaps of h or more
 //! they stay apart); sharp creases are rounded; curvature bias grows with h^2 / R; near open
