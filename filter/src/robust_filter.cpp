@@ -937,36 +937,60 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       const std::vector<std::uint32_t>& ord = index->order();
       const float r0 = std::min(static_cast<float>(r_est * 1.15), index->max_adjacent_radius());
       const float r02 = r0 * r0;
+      const float rmax2 = index->max_adjacent_radius() * index->max_adjacent_radius();
       if (index->cell_count() == 0)  // no grid (cannot happen with a cell > 0; kept safe)
         parallel_each(N, [&](std::size_t i) { hi[i] = static_cast<float>(kth(pf[i])); });
       parallel_each_reporting(index->cell_count(), o, "scale", [&](std::size_t c) {
         thread_local std::vector<float> bx, by, bz, d2, hit;
+        struct Run {
+          std::size_t b, e;
+          Eigen::Vector3f lo, hi;  // bounding box of the run's points
+        };
+        thread_local std::vector<Run> runs;
         bx.clear();
         by.clear();
         bz.clear();
+        runs.clear();
         index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) {
+          Run run{bx.size(), bx.size(), index->slot_point(b), index->slot_point(b)};
           for (std::uint32_t s = b; s < e; ++s) {
             const Eigen::Vector3f& p = index->slot_point(s);
             bx.push_back(p.x());
             by.push_back(p.y());
             bz.push_back(p.z());
+            run.lo = run.lo.cwiseMin(p);
+            run.hi = run.hi.cwiseMax(p);
           }
+          run.e = bx.size();
+          runs.push_back(run);
         });
-        const std::size_t m = bx.size();
-        d2.resize(m);
-        hit.resize(m);
+        hit.resize(bx.size());
+        d2.resize(bx.size());
         for (std::uint32_t s = index->cell_begin(c); s < index->cell_begin(c + 1); ++s) {
           const Eigen::Vector3f& q = index->slot_point(s);
           const float qx = q.x(), qy = q.y(), qz = q.z();
-          for (std::size_t j = 0; j < m; ++j) {
-            const float dx = bx[j] - qx, dy = by[j] - qy, dz = bz[j] - qz;
-            d2[j] = dx * dx + dy * dy + dz * dz;
-          }
-          std::size_t n = 0;
-          for (std::size_t j = 0; j < m; ++j) {
-            hit[n] = d2[j];
-            n += d2[j] < r02 ? 1 : 0;
-          }
+          // All points within r of q when r <= max_adjacent_radius(); first the start radius,
+          // then (rarely) the largest the 27 cells answer, then the general search.
+          auto select = [&](float r2) {
+            std::size_t n = 0;
+            for (const Run& run : runs) {
+              // Skip a cell whose points' box is out of reach.
+              const Eigen::Vector3f gap =
+                  (run.lo - q).cwiseMax(q - run.hi).cwiseMax(Eigen::Vector3f::Zero());
+              if (!(gap.squaredNorm() < r2)) continue;
+              for (std::size_t j = run.b; j < run.e; ++j) {
+                const float dx = bx[j] - qx, dy = by[j] - qy, dz = bz[j] - qz;
+                d2[j] = dx * dx + dy * dy + dz * dz;
+              }
+              for (std::size_t j = run.b; j < run.e; ++j) {
+                hit[n] = d2[j];
+                n += d2[j] < r2 ? 1 : 0;
+              }
+            }
+            return n;
+          };
+          std::size_t n = select(r02);
+          if (n < kk) n = select(rmax2);
           if (n >= kk) {
             std::nth_element(hit.begin(), hit.begin() + static_cast<std::ptrdiff_t>(kk - 1),
                              hit.begin() + static_cast<std::ptrdiff_t>(n));
