@@ -62,6 +62,25 @@ template <class V, class VI>
   return p * scale;
 }
 
+// The Mahalanobis e_j = x^T S_j^-1 x and the signed distance d_j = n_j . x of the candidates
+// [j, j + W) at the point (xs, ys, zs), x taken relative to their centres.
+template <class V, class VI>
+[[gnu::always_inline]] inline void e_and_d(const CandidateBuffer& b, std::size_t j, V xs, V ys,
+                                           V zs, V& e, V& d) {
+  const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
+  const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
+  const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
+  e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
+      load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
+      load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
+      (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
+       load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
+       load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
+  d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
+      dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
+      dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+}
+
 template <class V, class VI>
 [[gnu::always_inline]] inline bool step_impl(CandidateBuffer& b, const float x[3],
                                              const float nref[3], float t2, StepSums& out) {
@@ -73,18 +92,8 @@ template <class V, class VI>
   float* e_out = b.f[CandidateBuffer::kE].data();
   float* d_out = b.d.data();
   for (std::size_t j = 0; j < n; j += W) {
-    const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
-    const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
-    const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
-    const V e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
-                load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
-                load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
-                (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
-                 load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
-                 load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
-    const V d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
-                dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
-                dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    V e, d;
+    e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
     const VI keep = (e < t2) & (d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]));
     const V em = keep ? e : V{} + inf;
     vmin = em < vmin ? em : vmin;
@@ -140,18 +149,8 @@ template <class V, class VI>
   float* e_out = b.f[CandidateBuffer::kE].data();
   V vmin = V{} + inf;
   for (std::size_t j = 0; j < b.padded; j += W) {
-    const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
-    const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
-    const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
-    const V e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
-                load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
-                load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
-                (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
-                 load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
-                 load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
-    const V d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
-                dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
-                dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    V e, d;
+    e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
     const VI keep = d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]);
     const V em = keep ? e : V{} + inf;
     std::memcpy(e_out + j, &em, sizeof(V));
@@ -169,18 +168,8 @@ template <class V, class VI>
   const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
   V acc{};
   for (std::size_t j = 0; j < b.padded; j += W) {
-    const V dx = xs - load<V, VI>(&b.f[CandidateBuffer::kCx][j]);
-    const V dy = ys - load<V, VI>(&b.f[CandidateBuffer::kCy][j]);
-    const V dz = zs - load<V, VI>(&b.f[CandidateBuffer::kCz][j]);
-    const V e = load<V, VI>(&b.f[CandidateBuffer::kQ00][j]) * dx * dx +
-                load<V, VI>(&b.f[CandidateBuffer::kQ11][j]) * dy * dy +
-                load<V, VI>(&b.f[CandidateBuffer::kQ22][j]) * dz * dz +
-                (load<V, VI>(&b.f[CandidateBuffer::kQ01][j]) * dx * dy +
-                 load<V, VI>(&b.f[CandidateBuffer::kQ02][j]) * dx * dz +
-                 load<V, VI>(&b.f[CandidateBuffer::kQ12][j]) * dy * dz);
-    const V d = dx * load<V, VI>(&b.f[CandidateBuffer::kNx][j]) +
-                dy * load<V, VI>(&b.f[CandidateBuffer::kNy][j]) +
-                dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
+    V e, d;
+    e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
     const V slab = load<V, VI>(&b.f[CandidateBuffer::kH2][j]) - d * d;
     const VI keep = (e < t2) & (slab > 0.0f);
     V a = e * -0.5f;

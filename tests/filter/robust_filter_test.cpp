@@ -28,6 +28,15 @@ const Attribute& attr(const PointCloud& c, const std::string& name) {
   return *a;
 }
 
+// Input points in [first, end) (the injected ones) that no output point stands for.
+std::size_t injected_removed(const FilterResult& r, std::size_t first, std::size_t end) {
+  std::set<std::size_t> kept;
+  for (double s : attr(r.cloud, "source_index").values) kept.insert(static_cast<std::size_t>(s));
+  std::size_t n = 0;
+  for (std::size_t i = first; i < end; ++i) n += kept.count(i) ? 0 : 1;
+  return n;
+}
+
 // Every input point is either in an output point's merge_count or in the outliers cloud, once.
 void expect_accounting(const PointCloud& input, const FilterResult& r) {
   const auto& mc = attr(r.cloud, "merge_count").values;
@@ -217,13 +226,7 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   std::uniform_real_distribution<double> u(-0.4, 0.4), off(0.3, 0.9);
   for (int k = 0; k < 200; ++k)
     c.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng) * h_guess);
-  auto removed = [&](const FilterResult& r) {
-    std::set<std::size_t> kept;
-    for (double s : attr(r.cloud, "source_index").values) kept.insert(static_cast<std::size_t>(s));
-    std::size_t n = 0;
-    for (std::size_t i = inliers; i < c.size(); ++i) n += kept.count(i) ? 0 : 1;
-    return n;
-  };
+  auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
   auto inliers_kept = [&](const FilterResult& r) {
     std::size_t n = 0;
     for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
@@ -267,13 +270,7 @@ TEST(RobustFilterTest, VolumetricClutterIsRemovedByTheSupportDensityTest) {
     const Eigen::Vector3d p(u(rng), u(rng), z(rng));
     if (std::abs(p.z()) > 0.05) c.positions.push_back(p);
   }
-  auto removed = [&](const FilterResult& r) {
-    std::set<std::size_t> kept;
-    for (double s : attr(r.cloud, "source_index").values) kept.insert(static_cast<std::size_t>(s));
-    std::size_t n = 0;
-    for (std::size_t i = inliers; i < c.size(); ++i) n += kept.count(i) ? 0 : 1;
-    return n;
-  };
+  auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
   const FilterResult r = robust_filter(c, no_merge());
   std::size_t inliers_kept = 0;
   for (double s : attr(r.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
