@@ -141,8 +141,9 @@ struct Fit {
 // Weighted PCA of the neighbours of point i within h (eq. 2), made robust by trimming: the fit
 // is repeated without the neighbours farther than kTrim standard deviations from its plane
 // (sqrt of lambda_3, at least the eigenvalue floor), up to kRefits times. A near outlier would
-// otherwise stretch the kernels of the surface points around it towards itself (its weight is
-// 1/20 of a typical neighbourhood's at 0.5 h), and they would vouch for it. `visit(g)` must call
+// otherwise stretch the kernels of the surface points around it towards itself (at 0.5 h from a
+// kernel's centre and 5 sigma off its plane it adds about 40 % to the kernel's normal variance
+// with K_h = 96), and they would vouch for it. `visit(g)` must call
 // g(j) for a superset of the neighbours (indices into d). Returns false if fewer than k_min
 // remain.
 template <class Visit>
@@ -307,7 +308,7 @@ KernelSet build_kernels(const Points& d, std::unique_ptr<NeighborIndex>& point_i
     r[13] = d.w_at(i) * static_cast<float>(stride);
     if (prm.loo) {
       float* l = &loo[KernelSet::kLoo * k];
-      for (int k = 0; k < 3; ++k) l[k] = static_cast<float>(fit.m[k]);
+      for (int a = 0; a < 3; ++a) l[a] = static_cast<float>(fit.m[a]);
       l[3] = static_cast<float>(fit.weight);
       l[4] = static_cast<float>(fit.cov(0, 0));
       l[5] = static_cast<float>(fit.cov(1, 1));
@@ -1082,10 +1083,10 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     // chi-weighted count of its neighbours, itself left out) is below tau x the median over
     // the kernels is dropped as low density. The chi weights concentrate that count within
     // about h / 2, where a surface holds a quarter of its h-ball but volumetric clutter only an
-    // eighth: uniform clutter around a 10k-point shape (5 %) has 7-15 points in an h-ball,
-    // 0.07-0.15 of the surface's, and passes the spec's test on the output; its support is
-    // under 0.1 of the median. Points without a kernel of their own (kernel stride) are left to
-    // the output test.
+    // eighth. Uniform clutter collapses into dense clumps under the projection and then passes
+    // the spec's test on the output (10k points with 5 % clutter: the RMS distance of all output
+    // points fell from 0.0056 to 0.0035 with this test). Points without a kernel of their own
+    // (kernel stride) are left to the output test.
     std::vector<std::uint8_t> pre(N, 0);
     if (!support.empty()) {
       std::vector<float> v;
