@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -167,6 +168,36 @@ TEST(ScancleanCliTest, FilterSmoothsAPlaneAndAccountsForEveryPoint) {
   // No stray temporary files beside the outputs.
   for (const auto& entry : fs::directory_iterator(dir))
     EXPECT_FALSE(contains(entry.path().filename().string(), ".tmp")) << entry.path();
+}
+
+TEST(ScancleanCliTest, OutlierSigmaOptionReachesTheFilter) {
+  // Outliers 0.03-0.07 off a plane (h is about 0.09 here): the off-surface test drops them by
+  // default, and --outlier-sigma 0 turns it off (the summary counts them "off surface").
+  const auto dir = test::make_temp_dir("cli");
+  PointCloud cloud = test::noisy_plane(4000, 1.0, 0.004, 23);
+  cloud.normals.clear();
+  std::mt19937 rng(24);  // seed 24
+  std::uniform_real_distribution<double> u(-0.45, 0.45), off(0.03, 0.07);
+  for (int k = 0; k < 40; ++k)
+    cloud.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng));
+  write_point_cloud(dir / "in.ply", cloud);
+  auto off_surface = [&](const std::vector<std::string>& extra) {
+    std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
+                                     (dir / "out.ply").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const ProgramRun r = run(args, dir);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    const auto at = r.out.find("off surface ");
+    EXPECT_NE(at, std::string::npos) << r.out;
+    return at == std::string::npos ? -1L : std::stol(r.out.substr(at + 12));
+  };
+  EXPECT_GE(off_surface({}), 20L);
+  EXPECT_EQ(off_surface({"--outlier-sigma", "0"}), 0L);
+  EXPECT_EQ(run({"filter", (dir / "in.ply").string(), "-o", (dir / "o.ply").string(),
+                 "--outlier-sigma", "-1"},
+                dir)
+                .exit_code,
+            2);
 }
 
 TEST(ScancleanCliTest, UnwritableOutputExitsFourAndLeavesNoFile) {
