@@ -101,10 +101,10 @@ struct FilterOptions {
   double likelihood_ratio = 0.25;
   //! Off-surface test, before the projection: drop an input point when no kernel around it puts
   //! it within outlier_sigma standard deviations (Mahalanobis distance sqrt(e_j), slab test
-  //! included) once the point itself is taken out of that kernel's fit (leave-one-out), [0, 100];
-  //! 0 = off. Catches outliers closer than h to the surface, which the projection would otherwise
-  //! carry onto it; without the leave-one-out, a point's own kernel and those of outliers around
-  //! it, pulled towards it by its weight, would vouch for it.
+  //! included) once the point and the kernel's own centre point are taken out of that kernel's
+  //! fit, [0, 100]; 0 = off. Catches outliers closer than h to the surface, which the projection
+  //! would otherwise carry onto it; without leaving them out, a point's own kernel, and in pairs
+  //! and clumps of outliers each other's, pulled towards them by their weights, would vouch.
   double outlier_sigma = 4.0;
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
@@ -122,8 +122,8 @@ void validate(const FilterOptions& options);
 //! Bits of the "flags" attribute.
 enum FilterFlags : std::uint8_t {
   kFlagUnsupported = 1,  //!< no kernel supported the point (dropped)
-  kFlagOutlier =
-      2,  //!< removed by the off-surface, density or likelihood test or as a small component
+  //! removed by the off-surface, density or likelihood-ratio test, or as a small component
+  kFlagOutlier = 2,
   kFlagNotConverged = 4,  //!< iteration cap reached
 };
 
@@ -131,7 +131,7 @@ struct FilterStats {
   std::size_t points_in = 0;
   std::size_t points_out = 0;
   std::size_t unsupported = 0;       //!< input points dropped: no support
-  std::size_t low_density = 0;       //!< input points dropped by the density test
+  std::size_t low_density = 0;       //!< input points dropped by the density tests (tau)
   std::size_t off_surface = 0;       //!< input points dropped by the off-surface test
   std::size_t low_likelihood = 0;    //!< input points dropped by the likelihood-ratio test
   std::size_t small_components = 0;  //!< input points dropped with small components
