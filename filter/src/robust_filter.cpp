@@ -467,7 +467,7 @@ bool vouched(const ProjectionContext& ctx, detail::CandidateBuffer& buf, const E
     const double t_point = normals_agree ? weight_in_fit(d0) : 0.0;
     const double t_centre = is_centre ? 0.0 : weight_in_fit(Eigen::Vector3d::Zero());
     if (t_point + t_centre <= 0.1 * w && e[j] <= 0.25f * ctx.off_surface2) return true;
-    bool ok = true;
+    bool ok = true, downdated = false;
     for (const auto& [p, t] :
          {std::pair{d0, t_point}, std::pair{Eigen::Vector3d(0, 0, 0), t_centre}}) {
       if (!(t > 0)) continue;
@@ -480,9 +480,10 @@ bool vouched(const ProjectionContext& ctx, detail::CandidateBuffer& buf, const E
       m -= (t / w1) * delta;
       cov = (w / w1) * cov - (t * w / (w1 * w1)) * delta * delta.transpose();
       w = w1;
+      downdated = true;
     }
     if (!ok) continue;
-    es.computeDirect(cov / h2);
+    if (downdated) es.computeDirect(cov / h2);           // else the fit is the one solved above
     const Eigen::Vector3d y = (d0 - m) / std::sqrt(h2);  // in units of h
     const Eigen::Vector3d yl = es.eigenvectors().transpose() * y;
     double e1 = 0;
