@@ -102,6 +102,17 @@ int run(int argc, char** argv) {
       ->capture_default_str();
   double tune_sigma = 0;
   app.add_option("--tune-sigma", tune_sigma, "with --tune: only this noise level (0 = all)");
+  std::vector<std::size_t> sizes;
+  std::vector<double> sigmas;
+  bool filter_only = false;
+  app.add_option("--sizes", sizes, "quality suite: only these point counts (default 10000 50000)")
+      ->check(CLI::Range(std::size_t{100}, std::size_t{10000000}));
+  app.add_option("--sigmas", sigmas,
+                 "quality suite: only these noise levels (default 0.01 0.02 0.03)")
+      ->check(CLI::Range(0.0, 0.2));
+  app.add_flag("--filter-only", filter_only,
+               "quality suite: run robust_filter alone, without the peers (for quick experiments; "
+               "no target check)");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
   app.add_option("--speed-n", speed_n, "internal: points of the speed measurement")->group("");
   try {
@@ -122,6 +133,9 @@ int run(int argc, char** argv) {
   ctx.threads = threads;
   ctx.seed = seed;
   ctx.wlop_max_n = wlop_max_n;
+  ctx.sizes = sizes;
+  ctx.sigmas = sigmas;
+  ctx.filter_only = filter_only;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

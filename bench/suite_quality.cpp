@@ -1,5 +1,7 @@
 // Quality suite: the denoising protocol (no outliers), every method on the same inputs.
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <iostream>
 #include <map>
@@ -74,10 +76,21 @@ struct Accum {
 
 void run_quality_suite(Context& ctx) {
   auto shapes = protocol_shapes(ctx);
-  const std::vector<std::size_t> sizes =
+  std::vector<std::size_t> sizes =
       ctx.quick ? std::vector<std::size_t>{10000} : std::vector<std::size_t>{10000, 50000};
-  const std::vector<double> sigmas =
+  std::vector<double> sigmas =
       ctx.quick ? std::vector<double>{0.02} : std::vector<double>{0.01, 0.02, 0.03};
+  if (!ctx.sizes.empty()) sizes = ctx.sizes;
+  if (!ctx.sigmas.empty()) sigmas = ctx.sigmas;
+  // Seeds follow a noise level's place in the protocol's list, so that a subset (--sigmas)
+  // draws the very same instances as the full run.
+  std::vector<std::size_t> seed_index(sigmas.size());
+  for (std::size_t si = 0; si < sigmas.size(); ++si) {
+    const double protocol[] = {0.01, 0.02, 0.03};
+    seed_index[si] = 3 + si;
+    for (std::size_t k = 0; k < 3; ++k)
+      if (std::abs(sigmas[si] - protocol[k]) < 1e-12) seed_index[si] = k;
+  }
   constexpr std::size_t kDense = 100000;
 
   Table detail;
@@ -99,6 +112,11 @@ void run_quality_suite(Context& ctx) {
       const PeerSettings ps = peer_settings(sigma, n);
       const bool with_wlop = !ctx.quick && (ctx.wlop_max_n == 0 || n <= ctx.wlop_max_n);
       auto methods = smoothing_methods(ps, ctx.threads, with_wlop);
+      if (ctx.filter_only)
+        methods.erase(
+            std::remove_if(methods.begin(), methods.end(),
+                           [](const Method& m) { return m.name != "scanclean robust_filter"; }),
+            methods.end());
       for (const auto& m : methods)
         settings.rows.push_back({fmt_count(n), fmt(sigma, 2), m.name, m.settings});
       for (std::size_t shi = 0; shi < shapes.size(); ++shi) {
@@ -106,9 +124,10 @@ void run_quality_suite(Context& ctx) {
         InstanceSpec spec;
         spec.n = n;
         spec.sigma = sigma;
-        spec.seed = derive_seed(ctx.seed, 100 + shi, n, si);
+        spec.seed = derive_seed(ctx.seed, 100 + shi, n, seed_index[si]);
         Instance inst = make_instance(shape, spec);
-        GroundTruth gt(shape, inst.clean, kDense, derive_seed(ctx.seed, 200 + shi, n, si));
+        GroundTruth gt(shape, inst.clean, kDense,
+                       derive_seed(ctx.seed, 200 + shi, n, seed_index[si]));
         auto add_row = [&](int order, const std::string& name, const Metrics& mt, double secs) {
           detail.rows.push_back({shape.name(), fmt_count(n), fmt(sigma, 2), name, fmt(mt.cd, 2),
                                  fmt(mt.p2m, 2), fmt(mt.mean_dist, 4), fmt(mt.p95_dist, 4),
@@ -168,7 +187,7 @@ void run_quality_suite(Context& ctx) {
       "clean input scores 99 %).");
 
   // Targets: robust_filter vs jet and bilateral, per (N, sigma) on the averages and per shape.
-  if (filter_available()) {
+  if (filter_available() && !ctx.filter_only) {
     Table tgt;
     tgt.title = "Target check: robust_filter vs CGAL jet and bilateral (lower is better)";
     tgt.header = {"N",        "sigma",         "ours CD",         "best peer CD",
@@ -209,7 +228,8 @@ void run_quality_suite(Context& ctx) {
     ctx.add(std::move(tgt));
   } else {
     ctx.add(std::move(avg));
-    ctx.message("robust_filter is not part of this build: quality tables show the peers only.");
+    if (!filter_available())
+      ctx.message("robust_filter is not part of this build: quality tables show the peers only.");
   }
   ctx.add(std::move(settings));
   ctx.add(std::move(detail));

@@ -21,6 +21,9 @@ struct Context {
   std::filesystem::path bunny_mesh;  //!< recordings/bunny/bun_zipper.ply
   std::filesystem::path bunny_conf;  //!< ../shared/data/stanford_bunny/data/bun.conf
   std::size_t wlop_max_n = 10000;    //!< WLOP (slow) runs only up to this N (0 = always)
+  std::vector<std::size_t> sizes;    //!< quality suite: only these N (empty = the protocol's)
+  std::vector<double> sigmas;        //!< quality suite: only these noise levels (empty = all)
+  bool filter_only = false;          //!< quality suite: robust_filter alone (no peers)
   std::vector<Table> tables;
   std::vector<std::string> messages;  //!< skipped parts and other remarks for the report
   void add(Table t);
