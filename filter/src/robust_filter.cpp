@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "candidate_eval.h"
+#include "scale_test.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/filter/neighbor_index.h"
 
@@ -930,6 +931,22 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       }
       st.noise_sigma = sigma;
       h = std::max(h0, o.noise_factor * st.noise_sigma);
+      st.h_noise = h;
+      if (o.scale_gamma > 0) {
+        // The scale test (scale_test.h) over the same sample, on a grid sized for its largest
+        // ball; h is the median radius chosen. The standard errors use the noise estimate
+        // (trimmed, so clutter does not widen the intervals), floored like the kernels'
+        // eigenvalues so that noise-free data keeps h near h_noise.
+        detail::ScaleTestOptions so;
+        for (int k = -4; k <= 2; ++k) so.radii.push_back(h * std::pow(2.0, k / 4.0));
+        so.gamma = o.scale_gamma;
+        so.k_min = o.k_min;
+        so.sigma = std::max(st.noise_sigma, o.eigen_floor * h);
+        const NeighborIndex wide(pf, so.radii.back() * 0.7);
+        std::vector<std::size_t> queries;
+        for (std::size_t k = 0; k < M; k += sig_step) queries.push_back(sample[k]);
+        h = median_of(detail::scale_test(in.p, wide, queries, so));
+      }
       if (!(index->cell() >= h * 1.001 && index->cell() <= h * 1.7)) index.reset();
     } else {
       std::vector<float> hi(N);
@@ -1385,6 +1402,7 @@ void validate(const FilterOptions& o) {
   check_int("k_min", o.k_min, 3, 1000);
   check_real("truncation_sigma", o.truncation_sigma, 0, 10, true);
   check_real("noise_factor", o.noise_factor, 0, 20, true);
+  check_real("scale_gamma", o.scale_gamma, 0, 20, false);
   check_int("kernel_stride", o.kernel_stride, 0, 64);
   check_real("slab", o.slab, 0, 10, true);
   check_real("eigen_floor", o.eigen_floor, 0, 1, true);

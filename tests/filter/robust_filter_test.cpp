@@ -115,6 +115,44 @@ TEST(RobustFilterTest, NoisySphereKeepsItsRadius) {
   EXPECT_GT(r.cloud.size(), 0.99 * c.size());
 }
 
+// RMS distance of the points to the sphere |p| = radius.
+double rms_radial(const PointCloud& c, double radius) {
+  double s = 0;
+  for (const auto& p : c.positions) s += std::pow(p.norm() - radius, 2);
+  return std::sqrt(s / static_cast<double>(std::max<std::size_t>(1, c.size())));
+}
+
+TEST(RobustFilterTest, ScaleTestRaisesHOnFlatAndLowersItOnCurvedSurfaces) {
+  FilterOptions noise_rule = no_merge();
+  noise_rule.scale_gamma = 0;
+  {
+    // A plane has no curvature to bias a larger ball: h goes up the ladder, and less noise is
+    // left (measured 0.0017 against 0.0029 at the noise rule's h).
+    PointCloud c = test::noisy_plane(20000, 1.0, 0.01, 51);  // seed 51
+    c.normals.clear();
+    const FilterResult r = robust_filter(c, no_merge());
+    const FilterResult n = robust_filter(c, noise_rule);
+    EXPECT_GT(r.stats.h, 1.3 * r.stats.h_noise);
+    EXPECT_EQ(n.stats.h, n.stats.h_noise);
+    EXPECT_LT(rms_z(r.cloud), 0.8 * rms_z(n.cloud));
+    expect_accounting(c, r);
+  }
+  {
+    // A small sphere (radius 2x h_noise): the planes of larger balls shift with the curvature,
+    // so h goes down. The filter's own bias there is smaller than the planes' (its kernels are
+    // tangent around the point), so this costs accuracy on spheres (measured RMS 0.0015 against
+    // 0.0009 at the noise rule's h; documented), but the noise still falls more than 5x.
+    const double R = 0.1;
+    PointCloud c = test::noisy_sphere(20000, R, 0.01, 52);  // seed 52
+    c.normals.clear();
+    const FilterResult r = robust_filter(c, no_merge());
+    EXPECT_LT(r.stats.h, 0.8 * r.stats.h_noise);
+    EXPECT_LT(rms_radial(r.cloud, R) * 5, rms_radial(c, R));
+    EXPECT_GT(r.cloud.size(), 0.99 * c.size());
+    expect_accounting(c, r);
+  }
+}
+
 TEST(RobustFilterTest, DeterministicForAnyThreadCount) {
   PointCloud c = test::noisy_sphere(8000, 1.0, 0.01, 4);  // seed 4
   test::add_uniform_outliers(c, 300, -1.5, 1.5, 5);       // seed 5
@@ -164,17 +202,17 @@ TEST(RobustFilterTest, UniformOutliersAreRemovedAndInliersKept) {
   std::set<std::size_t> removed;
   for (double s : attr(r.outliers, "source_index").values)
     removed.insert(static_cast<std::size_t>(s));
-  // Outliers that fell into the surface band (|z| < h) are indistinguishable from surface
-  // points; recall is measured on the others.
+  // Recall over the outliers more than 10 noise sigma (0.02) off the plane; closer ones are
+  // indistinguishable from noisy surface points.
   std::size_t far = 0, far_removed = 0;
   for (std::size_t i : added) {
-    if (std::abs(c.positions[i].z()) < r.stats.h) continue;
+    if (std::abs(c.positions[i].z()) < 0.02) continue;
     ++far;
     far_removed += removed.count(i);
   }
   std::size_t inliers_kept = 0;
   for (double s : attr(r.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
-  EXPECT_GT(far, 900u);
+  EXPECT_GT(far, 950u);
   EXPECT_GE(static_cast<double>(far_removed), 0.99 * far);
   EXPECT_GE(static_cast<double>(inliers_kept), 0.99 * inliers);
   EXPECT_GT(r.stats.unsupported + r.stats.low_density, 0u);
@@ -194,6 +232,7 @@ TEST(RobustFilterTest, NoiseWiderThanTheNeighbourScaleRaisesH) {
   // The spec's literal rule (3 sigma measured at h0) leaves h at h0 and the noise high.
   FilterOptions spec = no_merge();
   spec.noise_factor = 3;
+  spec.scale_gamma = 0;
   const FilterResult s = robust_filter(c, spec);
   EXPECT_EQ(s.stats.h, s.stats.h0);
   EXPECT_LT(rms_z(r.cloud), rms_z(s.cloud));
@@ -217,11 +256,16 @@ TEST(RobustFilterTest, NoiseWiderThanTheNeighbourScaleRaisesH) {
 
 TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   // Outliers 0.3 h .. 0.9 h off a plane have surface kernels within reach and one of their own;
-  // without the off-surface and likelihood-ratio tests they stay where they are.
+  // without the off-surface and likelihood-ratio tests they stay where they are. The tests
+  // are checked one by one at the noise rule's h (scale test off: on this plane it would raise
+  // h by 1.41 and thin the kernels to every 2nd point, and outliers without a kernel of their
+  // own fall as unsupported), then all together with the defaults.
   PointCloud c = test::noisy_plane(20000, 1.0, 0.002, 32);  // seed 32
   c.normals.clear();
   const std::size_t inliers = c.size();
-  const double h_guess = robust_filter(c, no_merge()).stats.h;
+  FilterOptions base = no_merge();
+  base.scale_gamma = 0;
+  const double h_guess = robust_filter(c, base).stats.h;
   std::mt19937 rng(33);  // seed 33
   std::uniform_real_distribution<double> u(-0.4, 0.4), off(0.3, 0.9);
   for (int k = 0; k < 200; ++k)
@@ -233,19 +277,19 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
     return static_cast<double>(n);
   };
   // Each test alone, the density tests (tau, which also see these sparse points) off.
-  FilterOptions neither = no_merge();
+  FilterOptions neither = base;
   neither.likelihood_ratio = 0;
   neither.outlier_sigma = 0;
   neither.tau = 0;
   EXPECT_LT(removed(robust_filter(c, neither)), 100u);  // the failure the tests exist for
-  FilterOptions off_surface_only = no_merge();
+  FilterOptions off_surface_only = base;
   off_surface_only.likelihood_ratio = 0;
   off_surface_only.tau = 0;
   const FilterResult os = robust_filter(c, off_surface_only);
   EXPECT_GE(removed(os), 188u);  // 94 % (measured 192)
   EXPECT_GE(os.stats.off_surface, 170u);
   EXPECT_GE(inliers_kept(os), 0.995 * inliers);
-  FilterOptions lr_only = no_merge();
+  FilterOptions lr_only = base;
   lr_only.outlier_sigma = 0;
   lr_only.tau = 0;
   const FilterResult lr = robust_filter(c, lr_only);
@@ -271,14 +315,27 @@ TEST(RobustFilterTest, VolumetricClutterIsRemovedByTheSupportDensityTest) {
     if (std::abs(p.z()) > 0.05) c.positions.push_back(p);
   }
   auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
-  const FilterResult r = robust_filter(c, no_merge());
-  std::size_t inliers_kept = 0;
-  for (double s : attr(r.cloud, "source_index").values) inliers_kept += s < inliers ? 1 : 0;
-  // Measured: all 2000 removed, 331 as low density; without the support test 1993 and 217.
+  auto inliers_kept = [&](const FilterResult& r) {
+    std::size_t n = 0;
+    for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
+    return static_cast<double>(n);
+  };
+  // At the noise rule's h (scale test off). Measured: all 2000 removed, 331 as low density;
+  // without the support test 1993 and 217.
+  FilterOptions at_noise_h = no_merge();
+  at_noise_h.scale_gamma = 0;
+  const FilterResult r = robust_filter(c, at_noise_h);
   EXPECT_EQ(removed(r), 2000u);
   EXPECT_GE(r.stats.low_density, 300u);
-  EXPECT_GE(static_cast<double>(inliers_kept), 0.995 * inliers);
+  EXPECT_GE(inliers_kept(r), 0.995 * inliers);
   expect_accounting(c, r);
+  // The defaults: the scale test sees a flat surface and raises h by 1.41, nearer the clutter's
+  // 0.05 gap. Measured: 1969 of 2000 removed (the known cost of the larger h).
+  const FilterResult d = robust_filter(c, no_merge());
+  EXPECT_GT(d.stats.h, 1.3 * d.stats.h_noise);
+  EXPECT_GE(removed(d), 1960u);
+  EXPECT_GE(inliers_kept(d), 0.995 * inliers);
+  expect_accounting(c, d);
 }
 
 TEST(RobustFilterTest, SheetsAGapOfHApartStayApartAndCloserOnesMerge) {

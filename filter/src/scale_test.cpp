@@ -1,0 +1,91 @@
+#include "scale_test.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "scanclean/filter/neighbor_index.h"
+
+namespace scanclean::detail {
+
+namespace {
+
+constexpr std::size_t kMaxRadii = 16;
+
+// Moments of the neighbours in one shell, relative to the query point.
+struct Moments {
+  double n = 0;
+  Eigen::Vector3d s = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d ss = Eigen::Matrix3d::Zero();
+  void add(const Eigen::Vector3d& q) {
+    n += 1;
+    s += q;
+    ss.noalias() += q * q.transpose();
+  }
+  Moments& operator+=(const Moments& o) {
+    n += o.n;
+    s += o.s;
+    ss += o.ss;
+    return *this;
+  }
+};
+
+}  // namespace
+
+std::vector<double> scale_test(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
+                               const std::vector<std::size_t>& queries, const ScaleTestOptions& o) {
+  const std::size_t K = std::min(o.radii.size(), kMaxRadii);
+  std::vector<double> out(queries.size(), K ? o.radii.front() : 0.0);
+  if (K == 0) return out;
+  std::array<double, kMaxRadii> r2{};
+  for (std::size_t k = 0; k < K; ++k) r2[k] = o.radii[k] * o.radii[k];
+  const float rmax = static_cast<float>(o.radii[K - 1] * 1.0001);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 64),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t qi = range.begin(); qi < range.end(); ++qi) {
+                        const std::size_t i = queries[qi];
+                        const Eigen::Vector3d& x = p[i];
+                        // Shell k holds the neighbours with r_{k-1} < |q| <= r_k; the balls are
+                        // their sums.
+                        std::array<Moments, kMaxRadii> shell;
+                        index.for_each_within(x.cast<float>(), rmax, [&](std::uint32_t j, float) {
+                          if (j == i) return;
+                          const Eigen::Vector3d q = p[j] - x;
+                          const double d2 = q.squaredNorm();
+                          std::size_t k = 0;
+                          while (k < K && d2 > r2[k]) ++k;
+                          if (k < K) shell[k].add(q);
+                        });
+                        Moments ball;
+                        double lo = -HUGE_VAL, hi = HUGE_VAL;
+                        Eigen::Vector3d n_prev = Eigen::Vector3d::Zero();
+                        for (std::size_t k = 0; k < K; ++k) {
+                          ball += shell[k];
+                          if (ball.n < o.k_min) break;
+                          const Eigen::Vector3d c = ball.s / ball.n;
+                          const Eigen::Matrix3d cov = ball.ss / ball.n - c * c.transpose();
+                          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+                          es.computeDirect(cov);
+                          Eigen::Vector3d nk = es.eigenvectors().col(0);
+                          if (nk.dot(n_prev) < 0)
+                            nk = -nk;  // the same side as the smaller ball's normal
+                          n_prev = nk;
+                          const double z = -nk.dot(c);  // the point's signed distance to the plane
+                          const double var =
+                              o.sigma > 0 ? o.sigma * o.sigma : std::max(es.eigenvalues()[0], 0.0);
+                          const double se = std::sqrt(var / ball.n);
+                          lo = std::max(lo, z - o.gamma * se);
+                          hi = std::min(hi, z + o.gamma * se);
+                          if (lo > hi) break;
+                          out[qi] = o.radii[k];
+                        }
+                      }
+                    });
+  return out;
+}
+
+}  // namespace scanclean::detail

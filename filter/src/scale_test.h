@@ -1,0 +1,37 @@
+#pragma once
+//! Internal: the scale test of the automatic h. For a point, the intersection-of-confidence-
+//! intervals rule (Lepski's method; Katkovnik's ICI rule) picks the largest ball radius of a
+//! ladder at which a plane fit still agrees with the fits in all smaller balls.
+//!
+//! At each radius r_k the least-squares plane of the neighbours within r_k (the point itself
+//! left out) estimates where the surface passes the point: z_k, the point's signed distance to
+//! that plane, with standard error s_k = sqrt(lambda_3 / n_k). Larger balls shrink s_k; on a
+//! curved surface, or where another sheet comes into reach, they shift z_k (a plane's offset from
+//! a sphere of radius R grows like r^2 / 4R). The point's radius is the largest r_k whose interval
+//! [z_k - gamma s_k, z_k + gamma s_k] still meets every smaller radius' interval.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+namespace scanclean {
+class NeighborIndex;
+}
+
+namespace scanclean::detail {
+
+struct ScaleTestOptions {
+  std::vector<double> radii;  //!< ascending ball radii (metres), at most 16
+  double gamma = 3.0;         //!< interval half-width in standard errors
+  int k_min = 8;              //!< a radius with fewer neighbours ends the ladder
+  double sigma = 0;           //!< > 0: the noise sigma for the standard errors (else lambda_3)
+};
+
+//! The radius chosen for each point p[q] with q in `queries`. `index` holds the points of `p`
+//! (its original indices are p's), in float, relative to the same origin. A point whose smallest
+//! ball holds fewer than k_min neighbours gets radii.front(). Deterministic; parallel (TBB).
+std::vector<double> scale_test(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
+                               const std::vector<std::size_t>& queries,
+                               const ScaleTestOptions& options);
+
+}  // namespace scanclean::detail
