@@ -30,6 +30,7 @@ struct FilterCommandOptions {
   bool auto_scale = false;
   int k_h = FilterOptions{}.k_h;
   double noise_factor = FilterOptions{}.noise_factor;
+  double scale_gamma = FilterOptions{}.scale_gamma;
   int kernel_stride = FilterOptions{}.kernel_stride;
   double likelihood_ratio = FilterOptions{}.likelihood_ratio;
   double outlier_sigma = FilterOptions{}.outlier_sigma;
@@ -88,6 +89,7 @@ int run_filter(const FilterCommandOptions& c) {
   }
   o.k_h = c.k_h;
   o.noise_factor = c.noise_factor;
+  o.scale_gamma = c.scale_gamma;
   o.kernel_stride = c.kernel_stride;
   o.likelihood_ratio = c.likelihood_ratio;
   o.outlier_sigma = c.outlier_sigma;
@@ -158,8 +160,10 @@ int run_filter(const FilterCommandOptions& c) {
                   s.h_max * 1000.0);
     sum.add("h range", range);
   }
-  if (o.scale == ScaleMode::kAuto)
+  if (o.scale == ScaleMode::kAuto) {
     sum.add("noise sigma (estimate)", s.noise_sigma * 1000.0, 3, "mm");
+    if (o.scale_gamma > 0) sum.add("h before the scale test", s.h_noise * 1000.0, 3, "mm");
+  }
   sum.add("mean spacing", s.mean_spacing * 1000.0, 3, "mm");
   sum.add("kernels", with_thousands(s.kernels) +
                          (s.kernel_stride == 1
@@ -210,7 +214,8 @@ const CommandRegistrar kRegistrar{{
                     ->check(CLI::Range(2, 1000));
       auto* a = cmd.add_flag("--auto", c->auto_scale,
                              "Automatic h (default): median distance to the K_h-th neighbour, "
-                             "raised to --noise-factor x the noise sigma estimated at that scale");
+                             "raised to --noise-factor x the noise sigma estimated at that scale, "
+                             "then adjusted by the scale test (--scale-gamma)");
       h->excludes(k)->excludes(a);
       k->excludes(a);
       cmd.add_option("--k-h", c->k_h, "K_h, the neighbour rank of the automatic h")
@@ -218,6 +223,13 @@ const CommandRegistrar kRegistrar{{
       cmd.add_option("--noise-factor", c->noise_factor,
                      "Automatic h: at least this many times the noise sigma (estimated at the "
                      "scale h itself; the spec's literal rule is 3 at h0)")
+          ->capture_default_str();
+      cmd.add_option("--scale-gamma", c->scale_gamma,
+                     "Automatic h, last step: the median, over sampled points, of the largest "
+                     "ball (0.5 to 1.41 x the noise rule's h) whose plane agrees with every "
+                     "smaller ball's within this many standard errors; larger h on smooth "
+                     "surfaces, smaller on curved or thin parts (0 = off)")
+          ->check(CLI::Range(0.0, 20.0))
           ->capture_default_str();
       cmd.add_option("--kernel-stride", c->kernel_stride,
                      "Kernels at every N-th point (weights x N); 1 = at every point, as the "

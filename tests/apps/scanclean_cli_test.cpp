@@ -172,7 +172,9 @@ TEST(ScancleanCliTest, FilterSmoothsAPlaneAndAccountsForEveryPoint) {
 
 TEST(ScancleanCliTest, OutlierSigmaOptionReachesTheFilter) {
   // Outliers 0.03-0.07 off a plane (h is about 0.09 here): the off-surface test drops them by
-  // default, and --outlier-sigma 0 turns it off (the summary counts them "off surface").
+  // default, and --outlier-sigma 0 turns it off (the summary counts them "off surface"). At the
+  // noise rule's h (--scale-gamma 0): the scale test would raise h on this plane and thin the
+  // kernels, and most outliers, left without a kernel of their own, would fall as unsupported.
   const auto dir = test::make_temp_dir("cli");
   PointCloud cloud = test::noisy_plane(4000, 1.0, 0.004, 23);
   cloud.normals.clear();
@@ -182,8 +184,9 @@ TEST(ScancleanCliTest, OutlierSigmaOptionReachesTheFilter) {
     cloud.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng));
   write_point_cloud(dir / "in.ply", cloud);
   auto off_surface = [&](const std::vector<std::string>& extra) {
-    std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
-                                     (dir / "out.ply").string()};
+    std::vector<std::string> args = {
+        "filter", (dir / "in.ply").string(), "-o", (dir / "out.ply").string(), "--scale-gamma",
+        "0"};
     args.insert(args.end(), extra.begin(), extra.end());
     const ProgramRun r = run(args, dir);
     EXPECT_EQ(r.exit_code, 0) << r.err;
@@ -198,6 +201,37 @@ TEST(ScancleanCliTest, OutlierSigmaOptionReachesTheFilter) {
                 dir)
                 .exit_code,
             2);
+}
+
+TEST(ScancleanCliTest, ScaleGammaOptionReachesTheFilter) {
+  // On a plane the scale test raises h above the noise rule's (the summary shows both);
+  // --scale-gamma 0 keeps the noise rule's h, and a negative value exits 2.
+  const auto dir = test::make_temp_dir("cli");
+  PointCloud cloud = test::noisy_plane(4000, 1.0, 0.004, 25);  // seed 25
+  cloud.normals.clear();
+  write_point_cloud(dir / "in.ply", cloud);
+  auto run_filter = [&](const std::vector<std::string>& extra) {
+    std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
+                                     (dir / "out.ply").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args, dir);
+  };
+  // The value (mm) of a summary line "  key:   value mm".
+  auto mm_after = [](const std::string& out, const std::string& key) {
+    const std::string line = "\n  " + key + ":";
+    const auto at = out.find(line);
+    return at == std::string::npos ? -1.0 : std::stod(out.substr(at + line.size()));
+  };
+  const ProgramRun on = run_filter({});
+  ASSERT_EQ(on.exit_code, 0) << on.err;
+  const double h = mm_after(on.out, "h"), before = mm_after(on.out, "h before the scale test");
+  ASSERT_GT(before, 0) << on.out;
+  EXPECT_GT(h, 1.3 * before) << on.out;
+  const ProgramRun off = run_filter({"--scale-gamma", "0"});
+  ASSERT_EQ(off.exit_code, 0) << off.err;
+  EXPECT_EQ(off.out.find("h before the scale test"), std::string::npos) << off.out;
+  EXPECT_NEAR(mm_after(off.out, "h"), before, 1e-3 * before) << off.out;
+  EXPECT_EQ(run_filter({"--scale-gamma", "-1"}).exit_code, 2);
 }
 
 TEST(ScancleanCliTest, UnwritableOutputExitsFourAndLeavesNoFile) {

@@ -151,6 +151,7 @@ TEST(RealRecordingTest, AccumulatedCleanSurfaceHasLowerTemporalNoise) {
   // Cleaned: all 12 frames accumulated and filtered.
   FilterOptions fo;
   fo.threads = 2;
+  fo.scale_gamma = 0;  // as replay and capture run it on depth frames (off)
   const FilterResult r = accumulate_and_clean(cropped, info, {}, fo);
   ASSERT_GT(r.cloud.size(), t.pixels_valid_in_all / 2);  // merged, yet covers the surface
   double clean2 = 0;
