@@ -74,6 +74,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   run.off_surface = s.off_surface;
   run.low_density = s.low_density;
   run.low_likelihood = s.low_likelihood;
+  run.displaced = s.displaced;
   run.small_components = s.small_components;
   run.merged = s.merged;
   run.not_converged = s.not_converged;

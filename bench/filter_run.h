@@ -29,7 +29,7 @@ struct FilterRun {
   double seconds_wall = 0;                    //!< measured around the call
   // FilterStats, copied so that callers need not see the filter header.
   double h = 0, noise_sigma = 0, mean_iterations = 0, p95_iterations = 0;
-  std::size_t unsupported = 0, off_surface = 0, low_density = 0, low_likelihood = 0,
+  std::size_t unsupported = 0, off_surface = 0, low_density = 0, low_likelihood = 0, displaced = 0,
               small_components = 0, merged = 0, not_converged = 0;
   double s_scale = 0, s_kernels = 0, s_projection = 0, s_clustering = 0, s_outliers = 0,
          s_total = 0;

@@ -87,7 +87,8 @@ void run_real_suite(Context& ctx) {
   t.notes.push_back("Input points removed as outliers: " + fmt_count(merged.size() - kept_inputs) +
                     " (unsupported " + fmt_count(run.unsupported) + ", off surface " +
                     fmt_count(run.off_surface) + ", low density " + fmt_count(run.low_density) +
-                    ", low likelihood " + fmt_count(run.low_likelihood) + ", small components " +
+                    ", low likelihood " + fmt_count(run.low_likelihood) + ", displaced " +
+                    fmt_count(run.displaced) + ", small components " +
                     fmt_count(run.small_components) +
                     "); merged into other output points: " + fmt_count(run.merged) + ".");
   // The setting of the 2.1M-point speed target (adaptive k = 250), with its automatic kernel

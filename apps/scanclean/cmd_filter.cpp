@@ -33,6 +33,7 @@ struct FilterCommandOptions {
   double scale_gamma = FilterOptions{}.scale_gamma;
   int kernel_stride = FilterOptions{}.kernel_stride;
   double likelihood_ratio = FilterOptions{}.likelihood_ratio;
+  double displacement_sigma = FilterOptions{}.displacement_sigma;
   double outlier_sigma = FilterOptions{}.outlier_sigma;
   std::string update = "normal";
   double merge_eps = -1;
@@ -92,6 +93,7 @@ int run_filter(const FilterCommandOptions& c) {
   o.scale_gamma = c.scale_gamma;
   o.kernel_stride = c.kernel_stride;
   o.likelihood_ratio = c.likelihood_ratio;
+  o.displacement_sigma = c.displacement_sigma;
   o.outlier_sigma = c.outlier_sigma;
   o.k_min = c.k_min;
   o.max_iterations = c.max_iterations;
@@ -141,12 +143,12 @@ int run_filter(const FilterCommandOptions& c) {
   sum.add_count("points in", s.points_in);
   sum.add_count("points out", s.points_out);
   sum.add_count("merged into others", s.merged);
-  sum.add("outliers removed", with_thousands(s.removed()) + " (unsupported " +
-                                  with_thousands(s.unsupported) + ", off surface " +
-                                  with_thousands(s.off_surface) + ", low density " +
-                                  with_thousands(s.low_density) + ", low likelihood " +
-                                  with_thousands(s.low_likelihood) + ", small components " +
-                                  with_thousands(s.small_components) + ")");
+  sum.add("outliers removed",
+          with_thousands(s.removed()) + " (unsupported " + with_thousands(s.unsupported) +
+              ", off surface " + with_thousands(s.off_surface) + ", low density " +
+              with_thousands(s.low_density) + ", low likelihood " +
+              with_thousands(s.low_likelihood) + ", displaced " + with_thousands(s.displaced) +
+              ", small components " + with_thousands(s.small_components) + ")");
   if (!c.outliers.empty()) sum.add("outliers file", c.outliers);
   sum.add("output file", c.output);
   const char* mode = o.scale == ScaleMode::kFixed  ? "fixed"
@@ -233,7 +235,8 @@ const CommandRegistrar kRegistrar{{
           ->capture_default_str();
       cmd.add_option("--kernel-stride", c->kernel_stride,
                      "Kernels at every N-th point (weights x N); 1 = at every point, as the "
-                     "paper; 0 = automatic: 1 unless the noise raised h above h0, then (h/h0)^2")
+                     "paper; 0 = automatic: 1 unless h was raised above h0 (noise, scale test), "
+                     "then (h/h0)^2")
           ->capture_default_str();
       cmd.add_option("--update", c->update,
                      "Projection step: 'normal' moves along the mean normal (default), "
@@ -255,6 +258,11 @@ const CommandRegistrar kRegistrar{{
                      "Drop points whose likelihood is below this fraction of the lower "
                      "quartile of the likelihoods of the points within h (points stopped off "
                      "the surface; 0 = off)")
+          ->capture_default_str();
+      cmd.add_option("--displacement-sigma", c->displacement_sigma,
+                     "After projecting, drop points whose move along the normal differs from "
+                     "the median move of the points within h by more than this many robust "
+                     "standard deviations (outliers pulled onto the surface; 0 = off)")
           ->capture_default_str();
       cmd.add_option("--small-components", c->small_components,
                      "Also drop connected pieces (link radius h) with fewer input points than "

@@ -1198,7 +1198,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   report(o, "outliers", 0);
   const std::size_t R = cl.seed.size();
   std::vector<std::uint8_t> rep_drop(R, 0);  // 0 keep, else flag
-  if (R > 0 && (o.tau > 0 || o.likelihood_ratio > 0 || o.remove_small_components)) {
+  if (R > 0 && (o.tau > 0 || o.likelihood_ratio > 0 || o.displacement_sigma > 0 ||
+                o.remove_small_components)) {
     std::vector<Eigen::Vector3f> rf(R);
     parallel_each(R, [&](std::size_t r) { rf[r] = cl.position[r].cast<float>(); });
     NeighborIndex ridx(std::move(rf), prm.cell * 1.001);
@@ -1211,7 +1212,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       hs[s] = static_cast<float>(d.hi_at(cl.seed[rord[s]]));
     });
     std::vector<std::uint8_t> drop(R, 0);
-    if (o.tau > 0 || o.likelihood_ratio > 0) {
+    if (o.tau > 0 || o.likelihood_ratio > 0 || o.displacement_sigma > 0) {
       // One pass over the output points within h of each: the density rho (input points they
       // stand for) and, for the likelihood-ratio test, the lower quartile of their likelihoods.
       // A point that stopped off the surface (a near outlier supported by the surface kernels,
@@ -1224,6 +1225,15 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       const bool by_l = o.likelihood_ratio > 0;
       std::vector<float> lik(by_l ? R : 0);
       if (by_l) parallel_each(R, [&](std::size_t s) { lik[s] = pr.L[cl.seed[rord[s]]]; });
+      // Displacement test: how far each output point's seed moved along its normal.
+      const bool by_d = o.displacement_sigma > 0;
+      std::vector<float> moved(by_d ? R : 0);
+      if (by_d)
+        parallel_each(R, [&](std::size_t s) {
+          const std::uint32_t i = cl.seed[rord[s]];
+          const Eigen::Vector3d step = x[i] - (input.positions[src[i]] - origin);
+          moved[s] = static_cast<float>(step.dot(pr.normal[i].cast<double>()));
+        });
       // When the kernels are thinned (h raised for the noise), so is this pass: both sums run
       // over every stride-th output point (slots are in grid order: an even subsample, about
       // K_h of them within h instead of K_h stride), and rho is scaled back by the stride. With
@@ -1237,13 +1247,16 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       }
       std::vector<double> rho(R, 0.0);
       std::vector<float> l_ref(by_l ? R : 0, 0.0f);
+      std::vector<std::uint8_t> displaced(by_d ? R : 0, 0);
       parallel_each(R, [&](std::size_t s) {
-        thread_local std::vector<float> around;
+        thread_local std::vector<float> around, around_d;
         around.clear();
+        around_d.clear();
         std::uint64_t sum = 0;
         auto visit = [&](std::uint32_t q) {
           sum += cnt[q];
           if (by_l) around.push_back(lik[q]);
+          if (by_d) around_d.push_back(moved[q]);
         };
         if (thinned)
           thinned->for_each_within(ridx.slot_point(s), hs[s], [&](std::uint32_t k, float) {
@@ -1259,6 +1272,17 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
           std::nth_element(around.begin(), quartile, around.end());
           l_ref[s] = *quartile;
         }
+        if (by_d && around_d.size() >= 8) {
+          // Robust z-score of the displacement among the neighbours' (median, 1.4826 MAD),
+          // the scale floored at 0.02 h.
+          const auto mid = around_d.begin() + static_cast<std::ptrdiff_t>(around_d.size() / 2);
+          std::nth_element(around_d.begin(), mid, around_d.end());
+          const float med = *mid;
+          for (float& v : around_d) v = std::abs(v - med);
+          std::nth_element(around_d.begin(), mid, around_d.end());
+          const double scale = std::max(1.4826 * static_cast<double>(*mid), 0.02 * hs[s]);
+          displaced[s] = std::abs(moved[s] - med) > o.displacement_sigma * scale ? 1 : 0;
+        }
       });
       const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
       for (std::size_t s = 0; s < R; ++s) {
@@ -1267,6 +1291,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         else if (by_l &&
                  static_cast<double>(lik[s]) < o.likelihood_ratio * static_cast<double>(l_ref[s]))
           drop[s] = kFlagOutlier | 16;  // 16: internal mark "low likelihood"
+        else if (by_d && displaced[s])
+          drop[s] = kFlagOutlier | 32;  // 32: internal mark "displaced"
       }
     }
     report(o, "outliers", 0.5);
@@ -1357,6 +1383,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
             ++st.small_components;
           else if (f & 16)
             ++st.low_likelihood;
+          else if (f & 32)
+            ++st.displaced;
           else
             ++st.low_density;
         }
@@ -1414,6 +1442,7 @@ void validate(const FilterOptions& o) {
                "a finite number (< 0: default 0.25 x mean spacing, 0: off, > 0: metres)");
   check_real("tau", o.tau, 0, 1, false);
   check_real("likelihood_ratio", o.likelihood_ratio, 0, 1, false);
+  check_real("displacement_sigma", o.displacement_sigma, 0, 100, false);
   check_real("outlier_sigma", o.outlier_sigma, 0, 100, false);
   if (o.min_component_size > 1000000000ULL)
     bad_option("min_component_size", to_str(o.min_component_size),

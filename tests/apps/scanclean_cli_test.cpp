@@ -234,6 +234,41 @@ TEST(ScancleanCliTest, ScaleGammaOptionReachesTheFilter) {
   EXPECT_EQ(run_filter({"--scale-gamma", "-1"}).exit_code, 2);
 }
 
+TEST(ScancleanCliTest, DisplacementOptionReachesTheFilter) {
+  // Outliers 5-10 sigma off a noisy sphere are pulled onto it; the displacement test (on by
+  // default) drops them and the summary counts them; --displacement-sigma 0 keeps them.
+  const auto dir = test::make_temp_dir("cli");
+  const double sigma = 0.002;
+  PointCloud cloud = test::noisy_sphere(8000, 0.3, sigma, 26);  // seed 26
+  cloud.normals.clear();
+  std::mt19937 rng(27);  // seed 27
+  std::normal_distribution<double> dir_of(0.0, 1.0);
+  std::uniform_real_distribution<double> gap(5 * sigma, 10 * sigma);
+  for (int k = 0; k < 100; ++k) {
+    const Eigen::Vector3d d = Eigen::Vector3d(dir_of(rng), dir_of(rng), dir_of(rng)).normalized();
+    cloud.positions.push_back(d * (0.3 + (k % 2 ? 1 : -1) * gap(rng)));
+  }
+  write_point_cloud(dir / "in.ply", cloud);
+  auto run_filter = [&](const std::vector<std::string>& extra) {
+    std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
+                                     (dir / "out.ply").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args, dir);
+  };
+  // The count after "displaced " in the summary's outliers line.
+  auto displaced = [](const std::string& out) {
+    const auto at = out.find("displaced ");
+    return at == std::string::npos ? -1L : std::stol(out.substr(at + 10));
+  };
+  const ProgramRun on = run_filter({});
+  ASSERT_EQ(on.exit_code, 0) << on.err;
+  EXPECT_GE(displaced(on.out), 15) << on.out;  // measured 25 (64 more are unsupported)
+  const ProgramRun off = run_filter({"--displacement-sigma", "0"});
+  ASSERT_EQ(off.exit_code, 0) << off.err;
+  EXPECT_EQ(displaced(off.out), 0) << off.out;
+  EXPECT_EQ(run_filter({"--displacement-sigma", "-1"}).exit_code, 2);
+}
+
 TEST(ScancleanCliTest, UnwritableOutputExitsFourAndLeavesNoFile) {
   const auto dir = test::make_temp_dir("cli");
   write_point_cloud(dir / "in.ply", test::noisy_plane(300, 1.0, 0.001, 5));

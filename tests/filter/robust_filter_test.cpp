@@ -44,7 +44,7 @@ void expect_accounting(const PointCloud& input, const FilterResult& r) {
   EXPECT_EQ(static_cast<std::size_t>(merged) + r.outliers.size(), input.size());
   EXPECT_EQ(r.stats.points_out, r.cloud.size());
   EXPECT_EQ(r.stats.unsupported + r.stats.off_surface + r.stats.low_density +
-                r.stats.low_likelihood + r.stats.small_components,
+                r.stats.low_likelihood + r.stats.displaced + r.stats.small_components,
             r.outliers.size());
   EXPECT_EQ(r.stats.removed(), r.outliers.size());
   std::set<double> seen;
@@ -265,6 +265,7 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   const std::size_t inliers = c.size();
   FilterOptions base = no_merge();
   base.scale_gamma = 0;
+  base.displacement_sigma = 0;  // these outliers keep their own mode: nothing to displace
   const double h_guess = robust_filter(c, base).stats.h;
   std::mt19937 rng(33);  // seed 33
   std::uniform_real_distribution<double> u(-0.4, 0.4), off(0.3, 0.9);
@@ -298,6 +299,49 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   EXPECT_GE(removed(with), 194u);  // 97 % (measured 196)
   EXPECT_GE(inliers_kept(with), 0.995 * inliers);
   expect_accounting(c, with);
+}
+
+TEST(RobustFilterTest, OutliersPulledOntoTheSurfaceAreRemovedByTheDisplacementTest) {
+  // Outliers 5-10 sigma off a noisy sphere, too sparse for kernels of their own: the surface
+  // kernels pull them onto the surface, where they end among the inliers' outputs with a
+  // likelihood like theirs. Their move along the normal is 5-10x the inliers' spread, which is
+  // what the displacement test looks at.
+  const double sigma = 0.002;
+  PointCloud c = test::noisy_sphere(20000, 0.3, sigma, 51);  // seed 51
+  c.normals.clear();
+  const std::size_t inliers = c.size();
+  std::mt19937 rng(52);  // seed 52
+  std::normal_distribution<double> dir(0.0, 1.0);
+  std::uniform_real_distribution<double> off(5 * sigma, 10 * sigma);
+  for (int k = 0; k < 200; ++k) {
+    const Eigen::Vector3d d = Eigen::Vector3d(dir(rng), dir(rng), dir(rng)).normalized();
+    c.positions.push_back(d * (0.3 + (k % 2 ? 1 : -1) * off(rng)));
+  }
+  auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
+  auto inliers_kept = [&](const FilterResult& r) {
+    std::size_t n = 0;
+    for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
+    return static_cast<double>(n);
+  };
+  // The other tests off, so that the displacement test is measured alone.
+  FilterOptions base = no_merge();
+  base.likelihood_ratio = 0;
+  base.outlier_sigma = 0;
+  base.tau = 0;
+  FilterOptions off_all = base;
+  off_all.displacement_sigma = 0;
+  const FilterResult none = robust_filter(c, off_all);
+  EXPECT_LT(removed(none), 60u);  // unsupported only (measured 33)
+  EXPECT_EQ(none.stats.displaced, 0u);
+  const FilterResult d = robust_filter(c, base);  // displacement_sigma = 4 (default)
+  EXPECT_GE(removed(d), 190u);                    // 95 % (measured 199)
+  EXPECT_GE(d.stats.displaced, 150u);             // measured 168
+  EXPECT_GE(inliers_kept(d), 0.999 * inliers);    // measured 19,996 of 20,000
+  expect_accounting(c, d);
+  // The defaults (every test on) do as well.
+  const FilterResult all = robust_filter(c, no_merge());
+  EXPECT_GE(removed(all), 190u);  // measured 200
+  EXPECT_GE(inliers_kept(all), 0.999 * inliers);
 }
 
 TEST(RobustFilterTest, VolumetricClutterIsRemovedByTheSupportDensityTest) {
@@ -518,6 +562,8 @@ TEST(RobustFilterTest, ValidateRejectsEachBadOption) {
       {"noise_factor", [](FilterOptions& o) { o.noise_factor = 25; }},
       {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = -0.5; }},
       {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = 2; }},
+      {"displacement_sigma", [](FilterOptions& o) { o.displacement_sigma = -1; }},
+      {"displacement_sigma", [](FilterOptions& o) { o.displacement_sigma = 1e9; }},
       {"threads", [](FilterOptions& o) { o.threads = -1; }},
       {"min_component_size", [](FilterOptions& o) { o.min_component_size = 10000000000ULL; }},
   };

@@ -21,10 +21,13 @@
 //!    members' positions.
 //!  - Density test: rho counts input points (member counts); the component-size test also
 //!    counts input points.
+//!  - Automatic h: after the noise rule, the scale test (scale_gamma, filter/src/scale_test.h)
+//!    sets one h for the cloud from plane fits in balls of 0.5-1.41 h_noise at 2,500 points.
 //!  - Kernels are fitted robustly: the weighted PCA is repeated without the neighbours beyond
 //!    3 standard deviations of its plane (at most twice).
 //!  - Before the projection, points are dropped by the off-surface test (outlier_sigma) and by
-//!    the density test on their own kernel's support (tau); see the options.
+//!    the density test on their own kernel's support (tau); see the options. After it, the
+//!    converged points are dropped by the density, likelihood-ratio and displacement tests.
 //!  - The normal update is extrapolated (Aitken) when successive steps shrink by a steady ratio
 //!    r < 0.8; the stopping test uses the measured step, so the fixed points are unchanged.
 //!
@@ -74,7 +77,7 @@ struct FilterOptions {
   //! biased low there) and left 50k-point shapes at 3 % noise almost unfiltered; 6 solves the
   //! fixed point at h of about 5 true sigma.
   double noise_factor = 6.0;
-  //! kAuto, last step: the scale test, (0, 20]; 0 = off (h = h_noise). At a sample of points
+  //! kAuto, last step: the scale test, [0, 20]; 0 = off (h = h_noise). At a sample of points
   //! the intersection-of-confidence-intervals rule picks the largest ball of the ladder
   //! h_noise x 2^(k/4), k = -4..2 (0.5 to 1.41 h_noise), whose plane puts the surface where
   //! every smaller ball's plane does, within scale_gamma standard errors (noise sigma / sqrt(n),
@@ -85,9 +88,10 @@ struct FilterOptions {
   double scale_gamma = 3.0;
   //! Kernels at every kernel_stride-th point (spatially even, in grid order), their weights
   //! multiplied by the stride, [0, 64]. 1: a kernel at every point (the paper). 0 (automatic):
-  //! 1, unless the neighbourhoods hold more than K_h points: when kAuto raised h above h0 for
-  //! the noise, floor((h / h0)^2), so that a neighbourhood still holds about K_h kernels instead
-  //! of K_h (h / h0)^2; with kAdaptive, floor(k_adaptive / K_h) (2 at k_adaptive = 250).
+  //! 1, unless the neighbourhoods hold more than K_h points: when kAuto raised h above h0 (for
+  //! the noise or by the scale test), floor((h / h0)^2), so that a neighbourhood still holds about
+  //! K_h kernels instead of K_h (h / h0)^2; with kAdaptive, floor(k_adaptive / K_h) (2 at
+  //! k_adaptive = 250).
   int kernel_stride = 0;
   int k_adaptive = 48;            //!< neighbour rank for per-point h_i (kAdaptive), [2, 1000]
   int k_min = 8;                  //!< fewer neighbours within h_i: no kernel, [3, 1000]
@@ -110,6 +114,15 @@ struct FilterOptions {
   //! are: their L is 0.03-0.2 of their surroundings', while inliers' L, rims included, stays above
   //! 0.3 of it (measured on the benchmark's shapes).
   double likelihood_ratio = 0.25;
+  //! Displacement test, after the projection, [0, 100]; 0 = off: drop a point whose move along
+  //! its normal differs from the median move of the output points within h by more than this
+  //! many robust standard deviations (1.4826 x the median absolute deviation, at least 0.02 h;
+  //! at least 8 such points, else no test). An outlier near the surface is pulled onto it like
+  //! an inlier and ends among the inliers' outputs, but it moved much farther: with 5 % uniform
+  //! outliers on 10k-point shapes this finds the 1-2 % of them that the off-surface and
+  //! likelihood tests miss (strict recall 95.95 -> 99.70 %, inlier retention 99.94 -> 99.91 %);
+  //! on noisy shapes without outliers it takes under 0.01 % of the points (benchmark).
+  double displacement_sigma = 4.0;
   //! Off-surface test, before the projection: drop an input point when no kernel around it puts
   //! it within outlier_sigma standard deviations (Mahalanobis distance sqrt(e_j), slab test
   //! included) once the point and the kernel's own centre point are taken out of that kernel's
@@ -133,7 +146,8 @@ void validate(const FilterOptions& options);
 //! Bits of the "flags" attribute.
 enum FilterFlags : std::uint8_t {
   kFlagUnsupported = 1,  //!< no kernel supported the point (dropped)
-  //! removed by the off-surface, density or likelihood-ratio test, or as a small component
+  //! removed by the off-surface, density, likelihood-ratio or displacement test, or as a small
+  //! component
   kFlagOutlier = 2,
   kFlagNotConverged = 4,  //!< iteration cap reached
 };
@@ -145,11 +159,12 @@ struct FilterStats {
   std::size_t low_density = 0;       //!< input points dropped by the density tests (tau)
   std::size_t off_surface = 0;       //!< input points dropped by the off-surface test
   std::size_t low_likelihood = 0;    //!< input points dropped by the likelihood-ratio test
+  std::size_t displaced = 0;         //!< input points dropped by the displacement test
   std::size_t small_components = 0;  //!< input points dropped with small components
-  //! Every input point dropped (unsupported, off surface, low density, low likelihood, small
-  //! components).
+  //! Every input point dropped (unsupported, off surface, low density, low likelihood,
+  //! displaced, small components).
   std::size_t removed() const {
-    return unsupported + off_surface + low_density + low_likelihood + small_components;
+    return unsupported + off_surface + low_density + low_likelihood + displaced + small_components;
   }
   std::size_t merged = 0;       //!< input points merged into another output point
   std::size_t kernels = 0;      //!< points that got a kernel (>= k_min neighbours)
@@ -157,7 +172,7 @@ struct FilterStats {
   double h_min = 0, h_max = 0;  //!< range of h_i (equal to h unless kAdaptive)
   double h0 = 0;                //!< kAuto: the neighbour-distance median before the noise check
   double mean_spacing = 0;      //!< s = h0 / sqrt(K_h / pi) (kAuto), else h / sqrt(K / pi) (metres)
-  double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at the final scale (metres)
+  double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise (metres)
   double noise_sigma_h0 = 0;    //!< kAuto: the same at h0 (biased low when h0 < ~6 sigma)
   double h_noise = 0;     //!< kAuto: max(h0, noise_factor sigma), before the scale test (metres)
   int kernel_stride = 1;  //!< kernels at every kernel_stride-th point
