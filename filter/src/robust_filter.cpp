@@ -31,6 +31,9 @@ double since(Clock::time_point t) {
 
 constexpr std::size_t kGrain = 256;
 constexpr std::uint32_t kNone = 0xffffffffu;
+// The displacement test computes the median and MAD of the moves around every
+// kDisplacementAnchor-th output point (in grid order) and screens the points near it with them.
+constexpr std::size_t kDisplacementAnchor = 8;
 // Internal mark in Projected::flags: dropped before projection by the off-surface test.
 constexpr std::uint8_t kMarkOffSurface = 32;
 // Internal mark in Projected::flags: dropped before projection, its own kernel's support being
@@ -1245,19 +1248,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         parallel_each(sub.size(), [&](std::size_t k) { sub[k] = ridx.slot_point(k * stride); });
         thinned = std::make_unique<NeighborIndex>(std::move(sub), prm.cell * 1.001);
       }
-      std::vector<double> rho(R, 0.0);
-      std::vector<float> l_ref(by_l ? R : 0, 0.0f);
-      std::vector<std::uint8_t> displaced(by_d ? R : 0, 0);
-      parallel_each(R, [&](std::size_t s) {
-        thread_local std::vector<float> around, around_d;
-        around.clear();
-        around_d.clear();
-        std::uint64_t sum = 0;
-        auto visit = [&](std::uint32_t q) {
-          sum += cnt[q];
-          if (by_l) around.push_back(lik[q]);
-          if (by_d) around_d.push_back(moved[q]);
-        };
+      auto for_each_around = [&](std::size_t s, auto&& visit) {
         if (thinned)
           thinned->for_each_within(ridx.slot_point(s), hs[s], [&](std::uint32_t k, float) {
             visit(static_cast<std::uint32_t>(k * stride));
@@ -1265,6 +1256,43 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         else
           ridx.for_each_slot_within(ridx.slot_point(s), hs[s],
                                     [&](std::uint32_t q, float) { visit(q); });
+      };
+      // Displacement test: the median of the moves around s and 1.4826 x their median absolute
+      // deviation (the robust standard deviation), floored at 0.02 h; none (scale 0) when fewer
+      // than 8 points are around. `around` is overwritten.
+      struct MoveStats {
+        float median = 0, scale = 0;
+      };
+      auto move_stats = [&](std::vector<float>& around, std::size_t s) {
+        MoveStats m;
+        if (around.size() < 8) return m;
+        const auto mid = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 2);
+        std::nth_element(around.begin(), mid, around.end());
+        m.median = *mid;
+        for (float& v : around) v = std::abs(v - m.median);
+        std::nth_element(around.begin(), mid, around.end());
+        m.scale = std::max(1.4826f * *mid, 0.02f * hs[s]);
+        return m;
+      };
+      auto is_displaced = [&](std::size_t s, const MoveStats& m) {
+        return m.scale > 0 && static_cast<double>(std::abs(moved[s] - m.median)) >
+                                  o.displacement_sigma * static_cast<double>(m.scale);
+      };
+      std::vector<double> rho(R, 0.0);
+      std::vector<float> l_ref(by_l ? R : 0, 0.0f);
+      const std::size_t anchors = by_d ? (R + kDisplacementAnchor - 1) / kDisplacementAnchor : 0;
+      std::vector<MoveStats> anchor_stats(anchors);
+      parallel_each(R, [&](std::size_t s) {
+        thread_local std::vector<float> around, around_d;
+        around.clear();
+        around_d.clear();
+        const bool anchor = by_d && s % kDisplacementAnchor == 0;
+        std::uint64_t sum = 0;
+        for_each_around(s, [&](std::uint32_t q) {
+          sum += cnt[q];
+          if (by_l) around.push_back(lik[q]);
+          if (anchor) around_d.push_back(moved[q]);
+        });
         rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
         if (by_l) {
           if (around.empty()) around.push_back(lik[s]);  // s itself is off the subsample
@@ -1272,18 +1300,42 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
           std::nth_element(around.begin(), quartile, around.end());
           l_ref[s] = *quartile;
         }
-        if (by_d && around_d.size() >= 8) {
-          // Robust z-score of the displacement among the neighbours' (median, 1.4826 MAD),
-          // the scale floored at 0.02 h.
-          const auto mid = around_d.begin() + static_cast<std::ptrdiff_t>(around_d.size() / 2);
-          std::nth_element(around_d.begin(), mid, around_d.end());
-          const float med = *mid;
-          for (float& v : around_d) v = std::abs(v - med);
-          std::nth_element(around_d.begin(), mid, around_d.end());
-          const double scale = std::max(1.4826 * static_cast<double>(*mid), 0.02 * hs[s]);
-          displaced[s] = std::abs(moved[s] - med) > o.displacement_sigma * scale ? 1 : 0;
-        }
+        if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats(around_d, s);
       });
+      // Screen: a point within h of the nearer of its two anchors whose move lies within half
+      // the threshold of that anchor's median (2 robust deviations at the default 4) is kept;
+      // every other point gets the test with its own statistics. The screen saves time (the
+      // statistics change slowly over h): at 1M points 5 % of them were left to requery, and
+      // against the test at every point it kept 1 of the 4,792 points the latter dropped on the
+      // real bunny scans.
+      std::vector<std::uint8_t> displaced(by_d ? R : 0, 0);
+      if (by_d)
+        parallel_each(R, [&](std::size_t s) {
+          if (s % kDisplacementAnchor == 0) {
+            displaced[s] = is_displaced(s, anchor_stats[s / kDisplacementAnchor]) ? 1 : 0;
+            return;
+          }
+          // The nearer of the anchors before and after s in grid order.
+          std::size_t a = s / kDisplacementAnchor;
+          float d2 = (ridx.slot_point(s) - ridx.slot_point(a * kDisplacementAnchor)).squaredNorm();
+          if (a + 1 < anchors) {
+            const float d2_next =
+                (ridx.slot_point(s) - ridx.slot_point((a + 1) * kDisplacementAnchor)).squaredNorm();
+            if (d2_next < d2) {
+              a = a + 1;
+              d2 = d2_next;
+            }
+          }
+          const MoveStats& m = anchor_stats[a];
+          if (m.scale > 0 && d2 <= hs[s] * hs[s] &&
+              static_cast<double>(std::abs(moved[s] - m.median)) <=
+                  0.5 * o.displacement_sigma * static_cast<double>(m.scale))
+            return;
+          thread_local std::vector<float> around_d;
+          around_d.clear();
+          for_each_around(s, [&](std::uint32_t q) { around_d.push_back(moved[q]); });
+          displaced[s] = is_displaced(s, move_stats(around_d, s)) ? 1 : 0;
+        });
       const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
       for (std::size_t s = 0; s < R; ++s) {
         if (rho[s] < threshold)

@@ -57,6 +57,14 @@ ProgramRun run(const std::vector<std::string>& args, const fs::path& dir) {
   return r;
 }
 
+//! Runs `scanclean filter DIR/in.ply -o DIR/out.ply EXTRA...`.
+ProgramRun run_filter_in(const fs::path& dir, const std::vector<std::string>& extra) {
+  std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
+                                   (dir / "out.ply").string()};
+  args.insert(args.end(), extra.begin(), extra.end());
+  return run(args, dir);
+}
+
 bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
 }
@@ -211,10 +219,7 @@ TEST(ScancleanCliTest, ScaleGammaOptionReachesTheFilter) {
   cloud.normals.clear();
   write_point_cloud(dir / "in.ply", cloud);
   auto run_filter = [&](const std::vector<std::string>& extra) {
-    std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
-                                     (dir / "out.ply").string()};
-    args.insert(args.end(), extra.begin(), extra.end());
-    return run(args, dir);
+    return run_filter_in(dir, extra);
   };
   // The value (mm) of a summary line "  key:   value mm".
   auto mm_after = [](const std::string& out, const std::string& key) {
@@ -241,19 +246,10 @@ TEST(ScancleanCliTest, DisplacementOptionReachesTheFilter) {
   const double sigma = 0.002;
   PointCloud cloud = test::noisy_sphere(8000, 0.3, sigma, 26);  // seed 26
   cloud.normals.clear();
-  std::mt19937 rng(27);  // seed 27
-  std::normal_distribution<double> dir_of(0.0, 1.0);
-  std::uniform_real_distribution<double> gap(5 * sigma, 10 * sigma);
-  for (int k = 0; k < 100; ++k) {
-    const Eigen::Vector3d d = Eigen::Vector3d(dir_of(rng), dir_of(rng), dir_of(rng)).normalized();
-    cloud.positions.push_back(d * (0.3 + (k % 2 ? 1 : -1) * gap(rng)));
-  }
+  test::add_shell_outliers(cloud, 100, 0.3, 5 * sigma, 10 * sigma, 27);  // seed 27
   write_point_cloud(dir / "in.ply", cloud);
   auto run_filter = [&](const std::vector<std::string>& extra) {
-    std::vector<std::string> args = {"filter", (dir / "in.ply").string(), "-o",
-                                     (dir / "out.ply").string()};
-    args.insert(args.end(), extra.begin(), extra.end());
-    return run(args, dir);
+    return run_filter_in(dir, extra);
   };
   // The count after "displaced " in the summary's outliers line.
   auto displaced = [](const std::string& out) {

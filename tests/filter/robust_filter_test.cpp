@@ -37,6 +37,14 @@ std::size_t injected_removed(const FilterResult& r, std::size_t first, std::size
   return n;
 }
 
+// Output points that stand for an input point below `first` (the inliers, when the injected
+// points were appended).
+double kept_below(const FilterResult& r, std::size_t first) {
+  std::size_t n = 0;
+  for (double s : attr(r.cloud, "source_index").values) n += s < first ? 1 : 0;
+  return static_cast<double>(n);
+}
+
 // Every input point is either in an output point's merge_count or in the outliers cloud, once.
 void expect_accounting(const PointCloud& input, const FilterResult& r) {
   const auto& mc = attr(r.cloud, "merge_count").values;
@@ -272,11 +280,7 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   for (int k = 0; k < 200; ++k)
     c.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng) * h_guess);
   auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
-  auto inliers_kept = [&](const FilterResult& r) {
-    std::size_t n = 0;
-    for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
-    return static_cast<double>(n);
-  };
+  auto inliers_kept = [&](const FilterResult& r) { return kept_below(r, inliers); };
   // Each test alone, the density tests (tau, which also see these sparse points) off.
   FilterOptions neither = base;
   neither.likelihood_ratio = 0;
@@ -310,19 +314,9 @@ TEST(RobustFilterTest, OutliersPulledOntoTheSurfaceAreRemovedByTheDisplacementTe
   PointCloud c = test::noisy_sphere(20000, 0.3, sigma, 51);  // seed 51
   c.normals.clear();
   const std::size_t inliers = c.size();
-  std::mt19937 rng(52);  // seed 52
-  std::normal_distribution<double> dir(0.0, 1.0);
-  std::uniform_real_distribution<double> off(5 * sigma, 10 * sigma);
-  for (int k = 0; k < 200; ++k) {
-    const Eigen::Vector3d d = Eigen::Vector3d(dir(rng), dir(rng), dir(rng)).normalized();
-    c.positions.push_back(d * (0.3 + (k % 2 ? 1 : -1) * off(rng)));
-  }
+  test::add_shell_outliers(c, 200, 0.3, 5 * sigma, 10 * sigma, 52);  // seed 52
   auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
-  auto inliers_kept = [&](const FilterResult& r) {
-    std::size_t n = 0;
-    for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
-    return static_cast<double>(n);
-  };
+  auto inliers_kept = [&](const FilterResult& r) { return kept_below(r, inliers); };
   // The other tests off, so that the displacement test is measured alone.
   FilterOptions base = no_merge();
   base.likelihood_ratio = 0;
@@ -359,11 +353,7 @@ TEST(RobustFilterTest, VolumetricClutterIsRemovedByTheSupportDensityTest) {
     if (std::abs(p.z()) > 0.05) c.positions.push_back(p);
   }
   auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
-  auto inliers_kept = [&](const FilterResult& r) {
-    std::size_t n = 0;
-    for (double s : attr(r.cloud, "source_index").values) n += s < inliers ? 1 : 0;
-    return static_cast<double>(n);
-  };
+  auto inliers_kept = [&](const FilterResult& r) { return kept_below(r, inliers); };
   // At the noise rule's h (scale test off). Measured: all 2000 removed, 331 as low density;
   // without the support test 1993 and 217.
   FilterOptions at_noise_h = no_merge();

@@ -55,4 +55,18 @@ std::vector<std::size_t> add_uniform_outliers(PointCloud& cloud, std::size_t cou
   return added;
 }
 
+std::vector<std::size_t> add_shell_outliers(PointCloud& cloud, std::size_t count, double radius,
+                                            double near, double far, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::uniform_real_distribution<double> gap(near, far);
+  std::vector<std::size_t> added;
+  for (std::size_t k = 0; k < count; ++k) {
+    added.push_back(cloud.positions.size());
+    const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+    cloud.positions.push_back(d * (radius + (k % 2 ? 1 : -1) * gap(rng)));
+  }
+  return added;
+}
+
 }  // namespace scanclean::test

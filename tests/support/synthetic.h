@@ -22,4 +22,10 @@ PointCloud noisy_sphere(std::size_t n, double radius, double sigma, std::uint32_
 std::vector<std::size_t> add_uniform_outliers(PointCloud& cloud, std::size_t count, double lo,
                                               double hi, std::uint32_t seed);
 
+//! Appends `count` points at distances in [near, far] from the sphere of the given radius about
+//! the origin (uniform directions, alternately outside and inside) to a cloud without normals
+//! or confidences: outliers close to the surface. Returns the indices of the added points.
+std::vector<std::size_t> add_shell_outliers(PointCloud& cloud, std::size_t count, double radius,
+                                            double near, double far, std::uint32_t seed);
+
 }  // namespace scanclean::test
