@@ -1279,27 +1279,30 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
                                   o.displacement_sigma * static_cast<double>(m.scale);
       };
       std::vector<double> rho(R, 0.0);
-      std::vector<float> l_ref(by_l ? R : 0, 0.0f);
+      std::vector<std::uint8_t> low_l(by_l ? R : 0, 0);
       const std::size_t anchors = by_d ? (R + kDisplacementAnchor - 1) / kDisplacementAnchor : 0;
       std::vector<MoveStats> anchor_stats(anchors);
       parallel_each(R, [&](std::size_t s) {
-        thread_local std::vector<float> around, around_d;
-        around.clear();
+        thread_local std::vector<float> around_d;
         around_d.clear();
         const bool anchor = by_d && s % kDisplacementAnchor == 0;
+        // Likelihood ratio: L_s < ratio x Q1, Q1 the element at rank floor(n / 4) of the n
+        // likelihoods around, holds exactly when at most floor(n / 4) of them have ratio x L_q
+        // <= L_s (ratio x L is monotone in L), so a count replaces the selection. No points
+        // around (s is off the thinned subsample, and alone): Q1 would be L_s itself, kept.
+        const double l_s = by_l ? static_cast<double>(lik[s]) : 0.0;
         std::uint64_t sum = 0;
+        std::size_t n_l = 0, at_or_below = 0;
         for_each_around(s, [&](std::uint32_t q) {
           sum += cnt[q];
-          if (by_l) around.push_back(lik[q]);
+          if (by_l) {
+            ++n_l;
+            at_or_below += o.likelihood_ratio * static_cast<double>(lik[q]) <= l_s ? 1 : 0;
+          }
           if (anchor) around_d.push_back(moved[q]);
         });
         rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
-        if (by_l) {
-          if (around.empty()) around.push_back(lik[s]);  // s itself is off the subsample
-          const auto quartile = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 4);
-          std::nth_element(around.begin(), quartile, around.end());
-          l_ref[s] = *quartile;
-        }
+        if (by_l) low_l[s] = n_l > 0 && at_or_below <= n_l / 4 ? 1 : 0;
         if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats(around_d, s);
       });
       // Screen: a point within h of the nearer of its two anchors whose move lies within half
@@ -1340,8 +1343,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       for (std::size_t s = 0; s < R; ++s) {
         if (rho[s] < threshold)
           drop[s] = kFlagOutlier;
-        else if (by_l &&
-                 static_cast<double>(lik[s]) < o.likelihood_ratio * static_cast<double>(l_ref[s]))
+        else if (by_l && low_l[s])
           drop[s] = kFlagOutlier | 16;  // 16: internal mark "low likelihood"
         else if (by_d && displaced[s])
           drop[s] = kFlagOutlier | 32;  // 32: internal mark "displaced"
