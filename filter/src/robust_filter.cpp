@@ -1217,7 +1217,8 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
     std::vector<std::uint8_t> drop(R, 0);
     if (o.tau > 0 || o.likelihood_ratio > 0 || o.displacement_sigma > 0) {
       // One pass over the output points within h of each: the density rho (input points they
-      // stand for) and, for the likelihood-ratio test, the lower quartile of their likelihoods.
+      // stand for), for the likelihood-ratio test the lower quartile of their likelihoods, and
+      // at the anchors the displacement test's statistics (a second pass finishes that test).
       // A point that stopped off the surface (a near outlier supported by the surface kernels,
       // or by its own kernel, which its own weight stretches towards it) has a likelihood far
       // below that of the surface points around it; a point of a sparse region or at a rim
