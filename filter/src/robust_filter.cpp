@@ -20,6 +20,7 @@
 #include "scale_test.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/filter/neighbor_index.h"
+#include "select.h"
 
 namespace scanclean {
 namespace {
@@ -879,11 +880,9 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
       while (true) {
         d2s.clear();
         index->for_each_within(q, r, [&](std::uint32_t, float d2) { d2s.push_back(d2); });
-        if (d2s.size() >= kk) {
-          std::nth_element(d2s.begin(), d2s.begin() + static_cast<std::ptrdiff_t>(kk - 1),
-                           d2s.end());
-          return std::sqrt(static_cast<double>(d2s[kk - 1]));
-        }
+        if (d2s.size() >= kk)
+          return std::sqrt(static_cast<double>(
+              detail::kth_smallest_below(d2s.data(), d2s.size(), kk - 1, r * r)));
         if (r >= r_max)  // fewer than K + 1 points in all
           return d2s.empty()
                      ? 0.0
@@ -1011,12 +1010,11 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
             }
             return n;
           };
-          std::size_t n = select(r02);
-          if (n < kk) n = select(rmax2);
+          float r2 = r02;
+          std::size_t n = select(r2);
+          if (n < kk) n = select(r2 = rmax2);
           if (n >= kk) {
-            std::nth_element(hit.begin(), hit.begin() + static_cast<std::ptrdiff_t>(kk - 1),
-                             hit.begin() + static_cast<std::ptrdiff_t>(n));
-            hi[ord[s]] = std::sqrt(hit[kk - 1]);
+            hi[ord[s]] = std::sqrt(detail::kth_smallest_below(hit.data(), n, kk - 1, r2));
           } else {
             hi[ord[s]] = static_cast<float>(kth(q));
           }
