@@ -41,6 +41,11 @@ constexpr std::uint8_t kMarkOffSurface = 32;
 // below tau x the median (counted as low density).
 constexpr std::uint8_t kMarkSparse = 64;
 constexpr std::uint8_t kMarkDropped = kMarkOffSurface | kMarkSparse;
+// Internal marks of a dropped output point (beside kFlagOutlier), for the statistics: which
+// test after the projection dropped it (none of them: the density test).
+constexpr std::uint8_t kDropSmallComponent = 8;
+constexpr std::uint8_t kDropLowLikelihood = 16;
+constexpr std::uint8_t kDropDisplaced = 32;
 
 // Runs f(i) for i in [0, n) in parallel. Per-index work is independent, so the result does not
 // depend on how TBB splits the range.
@@ -1343,9 +1348,9 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         if (rho[s] < threshold)
           drop[s] = kFlagOutlier;
         else if (by_l && low_l[s])
-          drop[s] = kFlagOutlier | 16;  // 16: internal mark "low likelihood"
+          drop[s] = kFlagOutlier | kDropLowLikelihood;
         else if (by_d && displaced[s])
-          drop[s] = kFlagOutlier | 32;  // 32: internal mark "displaced"
+          drop[s] = kFlagOutlier | kDropDisplaced;
       }
     }
     report(o, "outliers", 0.5);
@@ -1371,7 +1376,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
                                         static_cast<std::uint64_t>(std::ceil(1e-3 * N)));
       for (std::size_t s = 0; s < R; ++s)
         if (!drop[s] && size[find_root(parent, static_cast<std::uint32_t>(s))] < min_size)
-          drop[s] = kFlagOutlier | 8;  // 8: internal mark "small component"
+          drop[s] = kFlagOutlier | kDropSmallComponent;
     }
     for (std::size_t s = 0; s < R; ++s) rep_drop[rord[s]] = drop[s];
   }
@@ -1432,11 +1437,11 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
         if (f) {
           in_flag[src[s]] =
               static_cast<std::uint8_t>(kFlagOutlier | (pr.flags[s] & kFlagNotConverged));
-          if (f & 8)
+          if (f & kDropSmallComponent)
             ++st.small_components;
-          else if (f & 16)
+          else if (f & kDropLowLikelihood)
             ++st.low_likelihood;
-          else if (f & 32)
+          else if (f & kDropDisplaced)
             ++st.displaced;
           else
             ++st.low_density;
