@@ -207,16 +207,15 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V4, VI4>(b, x, t2);
 }
 
-[[gnu::target("avx2,fma")]] void append_avx2(CandidateBuffer& b, const float* base,
+[[gnu::target("avx2,fma")]] void append_avx2(CandidateBuffer& b, const KernelRecord* records,
                                              const std::uint32_t* slots, std::size_t n,
                                              const float origin[3], float slab2) {
-  constexpr std::size_t R = CandidateBuffer::kRecord;
   std::size_t k = 0;
   for (; k + 8 <= n; k += 8) {
     const std::size_t j = b.count;
     for (int half = 0; half < 2; ++half) {
       __m256 r[8];
-      for (int i = 0; i < 8; ++i) r[i] = _mm256_loadu_ps(base + R * slots[k + i] + 8 * half);
+      for (int i = 0; i < 8; ++i) r[i] = _mm256_loadu_ps(records[slots[k + i]].f + 8 * half);
       const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
       const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
       const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
@@ -249,7 +248,7 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
     for (int i = 0; i < 8; ++i) b.slot[j + i] = slots[k + i];
     b.count += 8;
   }
-  for (; k < n; ++k) b.push_record(slots[k], base + R * slots[k], origin, slab2);
+  for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
 bool have_avx2() {
@@ -272,14 +271,14 @@ double likelihood(CandidateBuffer& buffer, const float x[3], float t2) {
   return have_avx2() ? likelihood_avx2(buffer, x, t2) : likelihood_sse(buffer, x, t2);
 }
 
-void append_records(CandidateBuffer& buffer, const float* rec_base, const std::uint32_t* slots,
-                    std::size_t n, const float origin[3], float slab2) {
+void append_records(CandidateBuffer& buffer, const KernelRecord* records,
+                    const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2) {
   buffer.reserve(buffer.count + n);
   if (have_avx2()) {
-    append_avx2(buffer, rec_base, slots, n, origin, slab2);
+    append_avx2(buffer, records, slots, n, origin, slab2);
   } else {
     for (std::size_t k = 0; k < n; ++k)
-      buffer.push_record(slots[k], rec_base + CandidateBuffer::kRecord * slots[k], origin, slab2);
+      buffer.push_record(slots[k], records[slots[k]], origin, slab2);
   }
 }
 

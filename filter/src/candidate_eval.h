@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "kernel_record.h"
+
 namespace scanclean::detail {
 
 //! Struct of arrays, padded with inert entries to a multiple of kCandidatePadding.
@@ -34,9 +36,6 @@ struct CandidateBuffer {
     kW,  // (slab h_j)^2, h_j^2, w_j
     kE   // scratch: masked Mahalanobis e_j
   };
-  //! Kernel record layout (16 floats, one cache line): c(3), S^-1 (6, as above), n(3), h2, w,
-  //! 2 unused.
-  static constexpr std::size_t kRecord = 16;
   std::vector<float> f[kFields];
   std::vector<float> d;  // scratch: signed distances d_j
   std::size_t count = 0;
@@ -45,8 +44,10 @@ struct CandidateBuffer {
 
   void clear() { count = 0; }
   void reserve(std::size_t n);  // capacity for n candidates (+ padding)
-  //! Appends kernel `rec` (kRecord floats) with its centre made relative to `origin`.
-  void push_record(unsigned kernel_slot, const float* rec, const float origin[3], float slab2) {
+  //! Appends kernel `record` with its centre made relative to `origin`.
+  void push_record(unsigned kernel_slot, const KernelRecord& record, const float origin[3],
+                   float slab2) {
+    const float* rec = record.f;
     if (count + kCandidatePadding >= f[0].size()) reserve(2 * count + 64);
     const std::size_t j = count++;
     f[kCx][j] = rec[0] - origin[0];
@@ -61,6 +62,16 @@ struct CandidateBuffer {
   void finish();  // pads to a multiple of kCandidatePadding with inert entries
 };
 
+// The record's fields are the buffer's, up to the normal (append_records copies them as they are).
+constexpr bool same_field(std::size_t record_field, std::size_t buffer_field) {
+  return record_field == buffer_field;
+}
+static_assert(same_field(KernelRecord::kCx, CandidateBuffer::kCx) &&
+                  same_field(KernelRecord::kQ00, CandidateBuffer::kQ00) &&
+                  same_field(KernelRecord::kQ12, CandidateBuffer::kQ12) &&
+                  same_field(KernelRecord::kNz, CandidateBuffer::kNz),
+              "KernelRecord and CandidateBuffer share the field order up to the normal");
+
 struct StepSums {
   double s = 0;              // sum omega
   double dn[3] = {0, 0, 0};  // sum omega d n
@@ -68,10 +79,10 @@ struct StepSums {
   float e_min = 0;
 };
 
-//! Appends the kernels with the given slots (records of kRecord floats at rec_base + kRecord *
-//! slot) with centres relative to origin; AVX2 transposes 8 records at a time.
-void append_records(CandidateBuffer& buffer, const float* rec_base, const std::uint32_t* slots,
-                    std::size_t n, const float origin[3], float slab2);
+//! Appends the kernels records[slots[k]], k < n, with centres relative to origin; AVX2
+//! transposes 8 records at a time.
+void append_records(CandidateBuffer& buffer, const KernelRecord* records,
+                    const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2);
 
 //! One iteration's sums at x (relative to the local origin). Returns false if no kernel is kept
 //! (e_j < t2 and d_j^2 < slab2_j). Fills buffer.f[kE] and buffer.d. The normal sum uses
@@ -83,7 +94,8 @@ bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], f
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
-//! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error ~1e-7).
+//! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error below 5e-7 on
+//! [-10, 0], where the loops use it; up to 4e-6 towards -80, from rounding a log2(e) in float).
 float fast_exp(float a);
 //! "avx2+fma" or "sse2": the path chosen at run time.
 const char* simd_path();

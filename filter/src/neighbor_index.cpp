@@ -1,4 +1,4 @@
-#include "scanclean/filter/neighbor_index.h"
+#include "neighbor_index.h"
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>

@@ -1,4 +1,4 @@
-#include "scanclean/filter/neighbor_index.h"
+#include "../../filter/src/neighbor_index.h"
 
 #include <gtest/gtest.h>
 

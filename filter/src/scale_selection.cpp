@@ -1,4 +1,4 @@
-#include "scale_test.h"
+#include "scale_selection.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -8,7 +8,7 @@
 #include <array>
 #include <cmath>
 
-#include "scanclean/filter/neighbor_index.h"
+#include "neighbor_index.h"
 
 namespace scanclean::detail {
 
@@ -36,8 +36,9 @@ struct Moments {
 
 }  // namespace
 
-std::vector<double> scale_test(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
-                               const std::vector<std::size_t>& queries, const ScaleTestOptions& o) {
+std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
+                                 const std::vector<std::size_t>& queries,
+                                 const ScaleSelectionOptions& o) {
   const std::size_t K = std::min(o.radii.size(), kMaxRadii);
   std::vector<double> out(queries.size(), K ? o.radii.front() : 0.0);
   if (K == 0) return out;

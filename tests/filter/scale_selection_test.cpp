@@ -1,8 +1,8 @@
-// The scale test of the automatic h (filter/src/scale_test.h) against situations whose answer
-// is known: a plane (no bias at any radius), spherical caps (bias growing as r^2 / R), two parallel
-// sheets (the second one enters the balls at the gap), too few neighbours.
+// The scale selection of the automatic h (filter/src/scale_selection.h) against situations whose
+// answer is known: a plane (no bias at any radius), spherical caps (bias growing as r^2 / R), two
+// parallel sheets (the second one enters the balls at the gap), too few neighbours.
 
-#include "../../filter/src/scale_test.h"
+#include "../../filter/src/scale_selection.h"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 #include <random>
 #include <vector>
 
-#include "scanclean/filter/neighbor_index.h"
+#include "../../filter/src/neighbor_index.h"
 
 namespace scanclean::detail {
 namespace {
@@ -32,8 +32,8 @@ void add_sheet(Cloud& c, std::size_t n, double z, double sigma, std::uint32_t se
   for (std::size_t i = 0; i < n; ++i) c.p.emplace_back(u(rng), u(rng), z + g(rng));
 }
 
-ScaleTestOptions ladder(double h, double sigma) {
-  ScaleTestOptions o;
+ScaleSelectionOptions ladder(double h, double sigma) {
+  ScaleSelectionOptions o;
   for (int k = -4; k <= 2; ++k) o.radii.push_back(h * std::pow(2.0, k / 4.0));
   o.sigma = sigma;
   return o;
@@ -52,20 +52,20 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-TEST(ScaleTestTest, APlaneTakesTheLargestRadius) {
+TEST(ScaleSelectionTest, APlaneTakesTheLargestRadius) {
   Cloud c;
   add_sheet(c, 20000, 0.0, 0.005, 61);  // seed 61
-  const ScaleTestOptions o = ladder(0.05, 0.005);
+  const ScaleSelectionOptions o = ladder(0.05, 0.005);
   const NeighborIndex index(c.f(), o.radii.back() * 0.7);
   const auto q = central(c, 0.3);
-  const std::vector<double> r = scale_test(c.p, index, q, o);
+  const std::vector<double> r = select_scale(c.p, index, q, o);
   std::size_t top = 0;
   for (double v : r) top += v == o.radii.back() ? 1 : 0;
   // A gamma = 3 interval misses by chance about 0.3 % of the time per comparison.
   EXPECT_GT(static_cast<double>(top), 0.9 * static_cast<double>(r.size()));
 }
 
-TEST(ScaleTestTest, MoreCurvedCapsTakeSmallerRadii) {
+TEST(ScaleSelectionTest, MoreCurvedCapsTakeSmallerRadii) {
   // Caps of spheres of radius R over the same square: the plane of a ball of radius r sits
   // about r^2 / 4R inside the sphere, so the more curved the cap, the sooner the balls disagree.
   std::vector<double> med;
@@ -73,9 +73,9 @@ TEST(ScaleTestTest, MoreCurvedCapsTakeSmallerRadii) {
     Cloud c;
     add_sheet(c, 20000, 0.0, 0.001, 62);  // seed 62
     for (auto& q : c.p) q.z() += R - std::sqrt(R * R - q.x() * q.x() - q.y() * q.y());
-    const ScaleTestOptions o = ladder(0.1, 0.001);
+    const ScaleSelectionOptions o = ladder(0.1, 0.001);
     const NeighborIndex index(c.f(), o.radii.back() * 0.7);
-    med.push_back(median(scale_test(c.p, index, central(c, 0.3), o)));
+    med.push_back(median(select_scale(c.p, index, central(c, 0.3), o)));
     if (R == 100.0) {
       EXPECT_EQ(med.back(), o.radii.back());
     }
@@ -85,28 +85,28 @@ TEST(ScaleTestTest, MoreCurvedCapsTakeSmallerRadii) {
   EXPECT_GT(med[1], med[2]);
 }
 
-TEST(ScaleTestTest, ASecondSheetStopsTheLadderAtTheGap) {
+TEST(ScaleSelectionTest, ASecondSheetStopsTheLadderAtTheGap) {
   // Sheets at z = 0 and z = 0.06: balls up to 0.06 see one sheet, larger ones both, whose plane
   // lies between them.
   Cloud c;
   add_sheet(c, 20000, 0.0, 0.002, 63);   // seed 63
   add_sheet(c, 20000, 0.06, 0.002, 64);  // seed 64
-  const ScaleTestOptions o = ladder(0.07, 0.002);
+  const ScaleSelectionOptions o = ladder(0.07, 0.002);
   const NeighborIndex index(c.f(), o.radii.back() * 0.7);
-  const std::vector<double> r = scale_test(c.p, index, central(c, 0.3), o);
+  const std::vector<double> r = select_scale(c.p, index, central(c, 0.3), o);
   const double m = median(r);
   EXPECT_LE(m, 0.06);
   EXPECT_GE(m, 0.06 / std::pow(2.0, 0.5));  // at most two rungs below the gap
 }
 
-TEST(ScaleTestTest, TooFewNeighboursGiveTheSmallestRadius) {
+TEST(ScaleSelectionTest, TooFewNeighboursGiveTheSmallestRadius) {
   Cloud c;
   add_sheet(c, 50, 0.0, 0.001, 65);  // seed 65: about 0.3 neighbours in the smallest ball
-  ScaleTestOptions o = ladder(0.01, 0.001);
+  ScaleSelectionOptions o = ladder(0.01, 0.001);
   const NeighborIndex index(c.f(), o.radii.back() * 0.7);
   std::vector<std::size_t> q(c.p.size());
   for (std::size_t i = 0; i < q.size(); ++i) q[i] = i;
-  for (double v : scale_test(c.p, index, q, o)) EXPECT_EQ(v, o.radii.front());
+  for (double v : select_scale(c.p, index, q, o)) EXPECT_EQ(v, o.radii.front());
 }
 
 }  // namespace

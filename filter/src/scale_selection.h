@@ -1,7 +1,8 @@
 #pragma once
-//! Internal: the scale test of the automatic h. For a point, the intersection-of-confidence-
-//! intervals rule (Lepski's method; Katkovnik's ICI rule) picks the largest ball radius of a
-//! ladder at which a plane fit still agrees with the fits in all smaller balls.
+//! Internal: scale selection for the automatic h (the "scale test"). For a point, the
+//! intersection-of-confidence- intervals rule (Lepski's method; Katkovnik's ICI rule) picks the
+//! largest ball radius of a ladder at which a plane fit still agrees with the fits in all smaller
+//! balls.
 //!
 //! At each radius r_k the least-squares plane of the neighbours within r_k (the point itself
 //! left out) estimates where the surface passes the point: z_k, the point's signed distance to
@@ -20,7 +21,7 @@ class NeighborIndex;
 
 namespace scanclean::detail {
 
-struct ScaleTestOptions {
+struct ScaleSelectionOptions {
   std::vector<double> radii;  //!< ascending ball radii (metres), at most 16
   double gamma = 3.0;         //!< interval half-width in standard errors
   int k_min = 8;              //!< a radius with fewer neighbours ends the ladder
@@ -30,8 +31,8 @@ struct ScaleTestOptions {
 //! The radius chosen for each point p[q] with q in `queries`. `index` holds the points of `p`
 //! (its original indices are p's), in float, relative to the same origin. A point whose smallest
 //! ball holds fewer than k_min neighbours gets radii.front(). Deterministic; parallel (TBB).
-std::vector<double> scale_test(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
-                               const std::vector<std::size_t>& queries,
-                               const ScaleTestOptions& options);
+std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
+                                 const std::vector<std::size_t>& queries,
+                                 const ScaleSelectionOptions& options);
 
 }  // namespace scanclean::detail

@@ -1,0 +1,70 @@
+#pragma once
+//! Internal: the weighted PCA of a point's neighbourhood (the paper's eq. 2), made robust by
+//! trimming. The kernels (kernels.h), the noise estimate of the automatic h (scale.h) and the
+//! tests share it.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <vector>
+
+#include "point_set.h"
+
+namespace scanclean::detail {
+
+struct KernelFit {
+  Eigen::Vector3d c;       //!< weighted centroid
+  Eigen::Vector3d lambda;  //!< ascending eigenvalues of C (m^2), not floored
+  Eigen::Matrix3d e;       //!< eigenvectors (columns, matching lambda)
+  Eigen::Vector3f n;       //!< kernel normal
+  Eigen::Vector3d m;       //!< c minus the centre point
+  Eigen::Matrix3d cov;     //!< weighted covariance (m^2), as fitted
+  double weight = 0;       //!< sum of the chi weights of the neighbours in the fit
+};
+
+//! One neighbour of the fit: its offset from the centre point (metres) and its chi weight
+//! t = (1 - r^2 / h^2)^4.
+struct FitSample {
+  double x, y, z, t;
+};
+
+//! The weighted PCA of `samples` around the centre point `centre` (eq. 2), repeated without the
+//! samples farther than 3 standard deviations from its plane (sqrt of lambda_3, at least the
+//! eigenvalue floor eigen_floor h), at most twice. A near outlier would otherwise stretch the
+//! kernels of the surface points around it towards itself (at 0.5 h from a kernel's centre and 5
+//! sigma off its plane it adds about 40 % to the kernel's normal variance with K_h = 96), and they
+//! would vouch for it. Fills everything but `n` (the caller orients it). Returns false if fewer
+//! than k_min samples remain. Trims `samples` in place.
+bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
+                 int k_min, double eigen_floor, KernelFit& out);
+
+//! The robust weighted PCA of the neighbours of point i of d within h. `visit(g)` must call g(j)
+//! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
+//! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
+//! normal is the sensor normal; otherwise it is the PCA normal. Returns false if fewer than
+//! k_min neighbours remain.
+template <class Visit>
+bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool oriented,
+                double eigen_floor, Visit&& visit, KernelFit& out) {
+  if (!(h > 0)) return false;
+  const Eigen::Vector3d pi = d.p[i];
+  const double h2 = h * h, inv_h2 = 1.0 / h2;
+  const bool use_dir = oriented && d.has_v(i);
+  const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
+  thread_local std::vector<FitSample> nb;
+  nb.clear();
+  visit([&](std::size_t j) {
+    const Eigen::Vector3d dj = d.p[j] - pi;
+    const double r2 = dj.squaredNorm();
+    if (!(r2 < h2)) return;
+    if (use_dir && !(d.v[j].dot(vi) > 0.5f)) return;
+    double t = 1.0 - r2 * inv_h2;
+    t *= t;
+    t *= t;
+    nb.push_back({dj.x(), dj.y(), dj.z(), t});
+  });
+  if (!fit_samples(nb, pi, h, k_min, eigen_floor, out)) return false;
+  out.n = use_dir ? vi : out.e.col(0).cast<float>().normalized();
+  return true;
+}
+
+}  // namespace scanclean::detail

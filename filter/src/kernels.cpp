@@ -1,0 +1,100 @@
+#include "kernels.h"
+
+#include <algorithm>
+#include <cstdint>
+
+#include "kernel_fit.h"
+#include "parallel.h"
+
+namespace scanclean::detail {
+
+KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point_index,
+                        PointIndexIds ids, const KernelParams& prm,
+                        std::vector<Eigen::Vector3f>& nref, const std::string& phase) {
+  const NeighborIndex& idx = *point_index;
+  const std::size_t n = d.p.size();
+  const FilterOptions& o = *prm.options;
+  const std::size_t stride = std::max<std::size_t>(1, prm.stride);
+  const std::size_t nk = (n + stride - 1) / stride;  // kernel candidates: i = k stride
+  std::vector<std::uint8_t> valid(nk, 0);
+  std::vector<KernelRecord> records(nk);  // candidate order first
+  std::vector<KernelFitRecord> fits(prm.keep_fits ? nk : 0);
+  nref.assign(n, Eigen::Vector3f::Zero());
+  const double floor2 = o.eigen_floor * o.eigen_floor;
+  const bool by_slot = ids == PointIndexIds::kSlots;
+  parallel_each_reporting(n, o, phase, [&](std::size_t i) {
+    if (i % stride != 0) return;  // d is in grid order: a spatially even subsample
+    const double h = d.hi_at(i);
+    const Eigen::Vector3f qi =
+        by_slot ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
+    KernelFit fit;
+    const bool ok = fit_kernel(
+        d, i, h, o.k_min, prm.oriented, o.eigen_floor,
+        [&](auto&& g) {
+          auto cb = [&](std::uint32_t j, float) { g(j); };
+          if (by_slot)
+            idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
+          else
+            idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
+        },
+        fit);
+    if (!ok) return;
+    nref[i] = fit.n;
+    if (prm.support) (*prm.support)[i] = static_cast<float>(fit.weight - 1.0);
+    if (!(d.w_at(i) > 0)) return;  // a zero-weight kernel contributes nothing
+    const double h2 = h * h;
+    Eigen::Vector3d inv;
+    for (int a = 0; a < 3; ++a) inv[a] = 1.0 / std::max(fit.lambda[a], floor2 * h2);
+    const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
+    const std::size_t k = i / stride;
+    records[k].set(fit.c, s_inv, fit.n, h2, d.w_at(i) * static_cast<float>(stride));
+    if (prm.keep_fits) fits[k].set(fit.m, fit.weight, fit.cov);
+    valid[k] = 1;
+  });
+  point_index.reset();  // the point index is not needed any more (memory)
+  KernelSet ks;
+  for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
+  // Compact the valid kernels (in place, with their fits), index their centres, then permute
+  // the records in place into the index's slot order, cycle by cycle (no second copy: memory).
+  std::size_t m = 0;
+  for (std::size_t k = 0; k < nk; ++k) {
+    if (!valid[k]) continue;
+    if (m != k) {
+      records[m] = records[k];
+      if (prm.keep_fits) fits[m] = fits[k];
+    }
+    ++m;
+  }
+  std::vector<std::uint8_t>().swap(valid);
+  records.resize(m);
+  if (prm.keep_fits) fits.resize(m);
+  std::vector<Eigen::Vector3f> centres(m);
+  for (std::size_t k = 0; k < m; ++k) centres[k] = records[k].centre();
+  ks.index =
+      std::make_unique<NeighborIndex>(std::move(centres), prm.cell * prm.gather_factor * 1.001);
+  const auto& order = ks.index->order();
+  std::vector<bool> done(m, false);
+  for (std::size_t s0 = 0; s0 < m; ++s0) {
+    if (done[s0]) continue;
+    const KernelRecord first = records[s0];
+    const KernelFitRecord first_fit = prm.keep_fits ? fits[s0] : KernelFitRecord{};
+    std::size_t s = s0;
+    while (true) {
+      done[s] = true;
+      const std::size_t from = order[s];
+      if (from == s0) {
+        records[s] = first;
+        if (prm.keep_fits) fits[s] = first_fit;
+        break;
+      }
+      records[s] = records[from];
+      if (prm.keep_fits) fits[s] = fits[from];
+      s = from;
+    }
+  }
+  ks.records = std::move(records);
+  ks.fits = std::move(fits);
+  return ks;
+}
+
+}  // namespace scanclean::detail

@@ -1,0 +1,53 @@
+#pragma once
+//! Internal: the kernels phase (the paper's section 2, eqs. 2-4). A weighted PCA at every
+//! kernel_stride-th point (in grid order: a spatially even subsample) gives each kernel its
+//! centre, its floored inverse covariance and its normal; the kernels are then frozen and
+//! indexed by centre for the projection.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "kernel_record.h"
+#include "neighbor_index.h"
+#include "point_set.h"
+#include "scanclean/filter/filter_options.h"
+
+namespace scanclean::detail {
+
+//! The frozen kernels of one pass, in the slot order of their centre index.
+struct KernelSet {
+  std::unique_ptr<NeighborIndex> index;  //!< over the centres (float, relative to the origin)
+  std::vector<KernelRecord> records;     //!< one per slot of index
+  std::vector<KernelFitRecord> fits;     //!< one per slot, when kept (KernelParams::keep_fits)
+  std::size_t fitted = 0;                //!< points that got a kernel (including w = 0)
+};
+
+struct KernelParams {
+  const FilterOptions* options = nullptr;
+  bool oriented = false;        //!< sensor normals select the neighbours (kernel_fit.h)
+  double cell = 0;              //!< grid cell of the centre index (h, or median h_i)
+  double gather_factor = 1.25;  //!< candidate radius / h
+  std::size_t stride = 1;       //!< a kernel at every stride-th point, weight x stride
+  bool keep_fits = false;       //!< keep the fits for the off-surface test's downdate
+  //! When set: per point of d, its own kernel's support (chi-weighted neighbour count, itself
+  //! left out); -1 where it has no kernel.
+  std::vector<float>* support = nullptr;
+};
+
+//! How the point index passed to build_kernels numbers the points of d.
+enum class PointIndexIds {
+  kSlots,  //!< d is in the index's slot order (slot s is point s of d)
+  kIds,    //!< the index's original indices are d's indices
+};
+
+//! Builds the kernels of the points of d. `point_index` holds d's points (float) and is released
+//! when the fits are done (memory). `nref` receives each point's kernel normal (zero where it has
+//! no kernel).
+KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point_index,
+                        PointIndexIds ids, const KernelParams& params,
+                        std::vector<Eigen::Vector3f>& nref, const std::string& phase);
+
+}  // namespace scanclean::detail

@@ -1,0 +1,81 @@
+#include "off_surface.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+namespace scanclean::detail {
+
+bool downdate_fit(Eigen::Vector3d& m, Eigen::Matrix3d& cov, double& w, const Eigen::Vector3d& p,
+                  double t, double min_weight) {
+  const double w1 = w - t;
+  if (!(w1 > min_weight)) return false;
+  const Eigen::Vector3d delta = p - m;
+  m -= (t / w1) * delta;
+  cov = (w / w1) * cov - (t * w / (w1 * w1)) * delta * delta.transpose();
+  w = w1;
+  return true;
+}
+
+bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vector3d& xl,
+             const Eigen::Vector3f& nref) {
+  using B = CandidateBuffer;
+  const float* e = buf.f[B::kE].data();
+  for (std::size_t j = 0; j < buf.count; ++j) {
+    if (!(e[j] <= test.threshold2)) continue;
+    const KernelFitRecord& fit = test.kernels->fits[buf.slot[j]];
+    Eigen::Vector3d m = fit.offset();
+    const Eigen::Vector3d c(buf.f[B::kCx][j], buf.f[B::kCy][j], buf.f[B::kCz][j]);
+    const Eigen::Vector3d d0 = xl - (c - m);  // from the kernel's centre point
+    const double h2 = buf.f[B::kH2][j];
+    Eigen::Matrix3d cov = fit.covariance();
+    double w = fit.weight;
+    // In the fit: within h of the centre, the sensor normals agreeing, inside the trimming band.
+    const Eigen::Vector3f nj(buf.f[B::kNx][j], buf.f[B::kNy][j], buf.f[B::kNz][j]);
+    const bool normals_agree = !(test.oriented && nref.squaredNorm() > 0.5f) || nref.dot(nj) > 0.5f;
+    // Upper bounds of the two weights (the band test below can only lower them) decide the
+    // shortcut without an eigen-decomposition.
+    const double r2 = d0.squaredNorm();
+    const bool is_centre = r2 == 0.0;
+    const double t_bound = (normals_agree && r2 < h2 ? 1.0 : 0.0) + (is_centre ? 0.0 : 1.0);
+    if (t_bound <= 0.1 * w && e[j] <= 0.25f * test.threshold2) return true;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+    es.computeDirect(cov / h2);
+    const Eigen::Vector3d n0 = es.eigenvectors().col(0);
+    const double band2 = 9.0 * std::max(es.eigenvalues()[0], test.floor2) * h2;
+    auto weight_in_fit = [&](const Eigen::Vector3d& p) {
+      const double pr2 = p.squaredNorm();
+      if (!(pr2 < h2)) return 0.0;
+      const double res = n0.dot(p - m);
+      if (res * res > band2) return 0.0;
+      double t = 1.0 - pr2 / h2;
+      t *= t;
+      return t * t;
+    };
+    const double t_point = normals_agree ? weight_in_fit(d0) : 0.0;
+    const double t_centre = is_centre ? 0.0 : weight_in_fit(Eigen::Vector3d::Zero());
+    if (t_point + t_centre <= 0.1 * w && e[j] <= 0.25f * test.threshold2) return true;
+    bool ok = true, downdated = false;
+    const double min_weight = 1e-3 * fit.weight;
+    for (const auto& [p, t] :
+         {std::pair{d0, t_point}, std::pair{Eigen::Vector3d(0, 0, 0), t_centre}}) {
+      if (!(t > 0)) continue;
+      if (!downdate_fit(m, cov, w, p, t, min_weight)) {
+        ok = false;
+        break;
+      }
+      downdated = true;
+    }
+    if (!ok) continue;
+    if (downdated) es.computeDirect(cov / h2);           // else the fit is the one solved above
+    const Eigen::Vector3d y = (d0 - m) / std::sqrt(h2);  // in units of h
+    const Eigen::Vector3d yl = es.eigenvectors().transpose() * y;
+    double e1 = 0;
+    for (int k = 0; k < 3; ++k) e1 += yl[k] * yl[k] / std::max(es.eigenvalues()[k], test.floor2);
+    if (e1 <= test.threshold2 && yl[0] * yl[0] * h2 < buf.f[B::kSlab2][j]) return true;
+  }
+  return false;
+}
+
+}  // namespace scanclean::detail

@@ -1,0 +1,113 @@
+#include "outputs.h"
+
+#include <cstddef>
+
+#include "parallel.h"
+
+namespace scanclean::detail {
+
+void write_outputs(const OutputInput& in, FilterResult& result) {
+  const PointCloud& input = *in.input;
+  const Clusters& cl = *in.clusters;
+  const std::vector<Removal>& rep_drop = *in.removal;
+  const Projected& pr = *in.projected;
+  const std::vector<std::uint32_t>& src = *in.input_index;
+  const Eigen::Vector3d& origin = in.origin;
+  FilterStats& st = result.stats;
+  const std::size_t N = input.size();
+  const std::size_t R = cl.seed.size();
+  // Output points in the input order of their seeds (seeds are distinct input points).
+  std::vector<std::uint32_t> kept;
+  {
+    std::vector<std::uint32_t> rep_at(N, kNone);
+    parallel_each(R, [&](std::size_t r) {
+      if (rep_drop[r] == Removal::kKept) rep_at[src[cl.seed[r]]] = static_cast<std::uint32_t>(r);
+    });
+    kept.reserve(R);
+    for (std::uint32_t r : rep_at)
+      if (r != kNone) kept.push_back(r);
+  }
+  {
+    std::vector<std::size_t> seeds(kept.size());
+    for (std::size_t k = 0; k < kept.size(); ++k) seeds[k] = src[cl.seed[kept[k]]];
+    PointCloud& out = result.cloud;
+    out = select(input, seeds);
+    out.grid = OrganizedGrid{};
+    out.normals.resize(kept.size());
+    std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
+        si(kept.size());
+    parallel_each(kept.size(), [&](std::size_t k) {
+      const std::uint32_t r = kept[k], s = cl.seed[r];
+      out.positions[k] = cl.position[r] + origin;
+      out.normals[k] = pr.normal[s];
+      L[k] = pr.L[s];
+      it[k] = pr.iterations[s];
+      fl[k] = pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0;
+      mc[k] = cl.count[r];
+      si[k] = src[s];
+    });
+    out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
+    out.set_attribute("iterations", AttributeType::kUInt8, std::move(it));
+    out.set_attribute("flags", AttributeType::kUInt8, std::move(fl));
+    out.set_attribute("merge_count", AttributeType::kUInt32, std::move(mc));
+    out.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
+    st.points_out = kept.size();
+    for (std::uint32_t r : kept) st.merged += cl.count[r] - 1;
+  }
+  {
+    std::vector<std::uint8_t> in_flag(N, 0);
+    for (std::size_t s = 0; s < N; ++s) {
+      switch (pr.state[s]) {
+        case ProjectionState::kUnsupported:
+          in_flag[src[s]] = kFlagUnsupported;
+          ++st.unsupported;
+          continue;
+        case ProjectionState::kOffSurface:
+          in_flag[src[s]] = kFlagOutlier;
+          ++st.off_surface;
+          continue;
+        case ProjectionState::kSparse:
+          in_flag[src[s]] = kFlagOutlier;
+          ++st.low_density;
+          continue;
+        case ProjectionState::kConverged:
+        case ProjectionState::kNotConverged:
+          break;
+      }
+      const Removal why = rep_drop[cl.rep_of[s]];
+      if (why == Removal::kKept) continue;
+      in_flag[src[s]] = static_cast<std::uint8_t>(
+          kFlagOutlier | (pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0));
+      switch (why) {
+        case Removal::kSmallComponent:
+          ++st.small_components;
+          break;
+        case Removal::kLowLikelihood:
+          ++st.low_likelihood;
+          break;
+        case Removal::kDisplaced:
+          ++st.displaced;
+          break;
+        case Removal::kLowDensity:
+        case Removal::kKept:
+          ++st.low_density;
+          break;
+      }
+    }
+    std::vector<std::size_t> idx;
+    for (std::size_t i = 0; i < N; ++i)
+      if (in_flag[i]) idx.push_back(i);
+    PointCloud& ol = result.outliers;
+    ol = select(input, idx);
+    ol.grid = OrganizedGrid{};
+    std::vector<double> fl(idx.size()), si(idx.size());
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      fl[k] = in_flag[idx[k]];
+      si[k] = static_cast<double>(idx[k]);
+    }
+    ol.set_attribute("flags", AttributeType::kUInt8, std::move(fl));
+    ol.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
+  }
+}
+
+}  // namespace scanclean::detail

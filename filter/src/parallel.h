@@ -1,0 +1,67 @@
+#pragma once
+//! Internal: the parallel loops, progress reports, timers and small statistics the filter's
+//! phases share. Every loop runs independent per-index work, so results do not depend on how
+//! TBB splits a range or on the thread count.
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "scanclean/filter/filter_options.h"
+
+namespace scanclean::detail {
+
+using Clock = std::chrono::steady_clock;
+inline double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+constexpr std::size_t kGrain = 256;
+//! "No index" in the filter's 32-bit index arrays.
+constexpr std::uint32_t kNone = 0xffffffffu;
+
+//! Runs f(i) for i in [0, n) in parallel.
+template <class F>
+void parallel_each(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) f(i);
+                    });
+}
+
+//! As parallel_each, in sequential chunks, reporting progress from the calling thread.
+template <class F>
+void parallel_each_reporting(std::size_t n, const FilterOptions& o, const std::string& phase,
+                             F&& f) {
+  const std::size_t chunks =
+      o.progress ? std::clamp<std::size_t>(n / 20000, 1, 50) : static_cast<std::size_t>(1);
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const std::size_t b = n * c / chunks, e = n * (c + 1) / chunks;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(b, e, kGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i < r.end(); ++i) f(i);
+                      });
+    if (o.progress) o.progress(phase, n ? static_cast<double>(e) / static_cast<double>(n) : 1.0);
+  }
+}
+
+inline void report(const FilterOptions& o, const std::string& phase, double fraction) {
+  if (o.progress) o.progress(phase, fraction);
+}
+
+//! The element at rank (n - 1) / 2 (the lower median); T{} for an empty vector.
+template <class T>
+T median_of(std::vector<T> v) {
+  if (v.empty()) return T{};
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>((v.size() - 1) / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+}  // namespace scanclean::detail

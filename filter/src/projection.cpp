@@ -1,0 +1,195 @@
+#include "projection.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "candidate_eval.h"
+#include "off_surface.h"
+#include "parallel.h"
+
+namespace scanclean::detail {
+namespace {
+
+struct ProjectionContext {
+  const KernelSet* ks = nullptr;
+  const FilterOptions* o = nullptr;
+  float t2 = 9;     // truncation_sigma^2
+  float slab2 = 1;  // slab^2
+  double gather_factor = 1.25;
+  OffSurfaceTest off_surface;  // threshold2 = 0: off
+};
+
+// The candidate kernels of a point at `of`: every kernel whose centre lies within
+// gather_factor h (a superset of those the truncation keeps while the point moves by less than
+// a quarter of h), relative to `of`.
+void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
+            CandidateBuffer& buf) {
+  const KernelSet& ks = *ctx.ks;
+  const float r = static_cast<float>(ctx.gather_factor * h), r2 = r * r;
+  const float origin[3] = {of.x(), of.y(), of.z()};
+  buf.clear();
+  const KernelRecord* records = ks.records.data();
+  const bool grid = ks.index->for_each_cell_run(of, r, [&](std::uint32_t b, std::uint32_t e) {
+    constexpr std::uint32_t kChunk = 64;
+    std::uint32_t hit[kChunk];
+    for (std::uint32_t s0 = b; s0 < e; s0 += kChunk) {
+      const std::uint32_t s1 = std::min(e, s0 + kChunk);
+      std::uint32_t n = 0;
+      for (std::uint32_t s = s0; s < s1; ++s) {  // branch-free selection on compact centres
+        const float* k = ks.index->slot_point(s).data();
+        const float dx = k[0] - origin[0], dy = k[1] - origin[1], dz = k[2] - origin[2];
+        hit[n] = s;
+        n += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
+      }
+      append_records(buf, records, hit, n, origin, ctx.slab2);
+    }
+  });
+  if (!grid)
+    ks.index->for_each_slot_within(
+        of, r, [&](std::uint32_t s, float) { buf.push_record(s, records[s], origin, ctx.slab2); });
+  buf.finish();
+}
+
+struct PointOutcome {
+  float L = 0;
+  std::uint8_t iterations = 0;
+  ProjectionState state = ProjectionState::kConverged;
+  Eigen::Vector3f normal = Eigen::Vector3f::Zero();
+};
+
+// Projects x (in place) onto a maximum of L; eqs. 6-10 with the options' update rule.
+PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, double h,
+                           Eigen::Vector3f nref) {
+  using B = CandidateBuffer;
+  thread_local B buf;
+  const FilterOptions& o = *ctx.o;
+  PointOutcome out;
+  const double tol = o.tolerance * h, regather = 0.25 * h;
+  bool have_ref = nref.squaredNorm() > 0.5f;
+  Eigen::Vector3f of = x.cast<float>();
+  Eigen::Vector3d origin = of.cast<double>();
+  gather(ctx, of, h, buf);
+  if (ctx.off_surface.threshold2 > 0 && buf.count > 0) {
+    // Only points the kernels support at all (as the first iteration will check); the others
+    // are left to be flagged unsupported.
+    const Eigen::Vector3d xl = x - origin;
+    const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
+                         static_cast<float>(xl.z())};
+    if (min_mahalanobis(buf, xf) < ctx.t2 && !vouched(ctx.off_surface, buf, xl, nref)) {
+      out.state = ProjectionState::kOffSurface;
+      out.normal = nref;
+      return out;
+    }
+  }
+  // x relative to the candidates' origin, in float; the candidates are gathered again around x
+  // once it has moved by more than a quarter of h from where they were gathered.
+  auto local_position = [&](float xf[3]) {
+    if ((x - origin).norm() > regather) {
+      of = x.cast<float>();
+      origin = of.cast<double>();
+      gather(ctx, of, h, buf);
+    }
+    const Eigen::Vector3d xl = x - origin;
+    for (int a = 0; a < 3; ++a) xf[a] = static_cast<float>(xl[a]);
+  };
+  int iters = 0;
+  bool converged = false;
+  Eigen::Vector3f nbar_out = nref;
+  const Eigen::Vector3d start = x;
+  double prev_mu = 0;
+  constexpr double kMaxRatio = 0.8;
+  for (int k = 0; k < o.max_iterations; ++k) {
+    float xf[3];
+    local_position(xf);
+    StepSums s;
+    if (!step_sums(buf, xf, nref.data(), ctx.t2, s)) {
+      out.state = ProjectionState::kUnsupported;
+      out.iterations = static_cast<std::uint8_t>(iters);
+      out.normal = nref;
+      x = start;
+      return out;
+    }
+    if (!have_ref) {  // no own kernel and no sensor normal: take the best kernel's normal
+      const float* e = buf.f[B::kE].data();
+      std::size_t best = 0;
+      while (best < buf.count && e[best] != s.e_min) ++best;
+      nref = Eigen::Vector3f(buf.f[B::kNx][best], buf.f[B::kNy][best], buf.f[B::kNz][best]);
+      have_ref = true;
+      step_sums(buf, xf, nref.data(), ctx.t2, s);
+    }
+    const Eigen::Vector3d m(s.dn[0] / s.s, s.dn[1] / s.s, s.dn[2] / s.s);
+    Eigen::Vector3d nb(s.n[0], s.n[1], s.n[2]);
+    const double nb_len = nb.norm();
+    nb = nb_len > 1e-12 * s.s ? Eigen::Vector3d(nb / nb_len) : nref.cast<double>();
+    const double mu = m.dot(nb);
+    // Both updates stop on the normal part |mu| (eq. 10 on the normal part, ALGORITHM.md 3):
+    // the tangential part of m never dies out.
+    if (o.update == UpdateMode::kNormal) {
+      // The mean shift converges linearly: along the normal, successive steps shrink by a
+      // nearly constant ratio r. When two steps agree in sign with r < 0.8, the step is
+      // extrapolated to the limit of the geometric series, mu / (1 - r) (Aitken); the stopping
+      // test still uses the measured mu, so the fixed point and the tolerance are unchanged.
+      double step = mu;
+      const double r = prev_mu != 0 ? mu / prev_mu : 0.0;
+      if (r > 0 && r < kMaxRatio) step = mu / (1 - r);
+      x -= step * nb;
+      prev_mu = mu;
+    } else {
+      x -= m;
+    }
+    const double step_len = std::abs(mu);
+    ++iters;
+    nbar_out = nb.cast<float>();
+    if (step_len < tol) {
+      converged = true;
+      break;
+    }
+  }
+  float xf[3];
+  local_position(xf);
+  out.L = static_cast<float>(likelihood(buf, xf, ctx.t2));
+  out.iterations = static_cast<std::uint8_t>(std::min(iters, 255));
+  out.state = converged ? ProjectionState::kConverged : ProjectionState::kNotConverged;
+  out.normal = nbar_out;
+  return out;
+}
+
+}  // namespace
+
+void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen::Vector3f>& nref,
+                 const FilterOptions& o, bool off_surface_test, bool oriented,
+                 const std::vector<std::uint8_t>& sparse, std::vector<Eigen::Vector3d>& x,
+                 Projected& out, const std::string& phase) {
+  ProjectionContext ctx;
+  ctx.ks = &ks;
+  ctx.o = &o;
+  ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
+  ctx.slab2 = static_cast<float>(o.slab * o.slab);
+  ctx.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
+  ctx.off_surface.kernels = &ks;
+  if (off_surface_test && !ks.fits.empty())
+    ctx.off_surface.threshold2 = static_cast<float>(o.outlier_sigma * o.outlier_sigma);
+  ctx.off_surface.floor2 = o.eigen_floor * o.eigen_floor;
+  ctx.off_surface.oriented = oriented;
+  const std::size_t n = x.size();
+  out.L.assign(n, 0);
+  out.iterations.assign(n, 0);
+  out.state.assign(n, ProjectionState::kConverged);
+  out.normal.assign(n, Eigen::Vector3f::Zero());
+  parallel_each_reporting(n, o, phase, [&](std::size_t i) {
+    // Sensor normals are the reference orientation when present, else the own kernel's normal.
+    const Eigen::Vector3f ref = d.has_v(i) ? d.v[i] : nref[i];
+    if (sparse[i]) {  // dropped before projection
+      out.state[i] = ProjectionState::kSparse;
+      out.normal[i] = ref;
+      return;
+    }
+    const PointOutcome r = project_point(ctx, x[i], d.hi_at(i), ref);
+    out.L[i] = r.L;
+    out.iterations[i] = r.iterations;
+    out.state[i] = r.state;
+    out.normal[i] = r.normal;
+  });
+}
+
+}  // namespace scanclean::detail

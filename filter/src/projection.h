@@ -1,0 +1,49 @@
+#pragma once
+//! Internal: the projection phase (the paper's section 2, eqs. 6-10). Every point moves by the
+//! mean-shift-like update onto a maximum of the likelihood L built from the frozen kernels; the
+//! off-surface test (off_surface.h) runs first, at the point's input position.
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "kernels.h"
+#include "point_set.h"
+#include "scanclean/filter/filter_options.h"
+
+namespace scanclean::detail {
+
+//! What became of a point in the projection phase.
+enum class ProjectionState : std::uint8_t {
+  kConverged,     //!< projected; the step fell below the tolerance
+  kNotConverged,  //!< projected; the iteration cap was reached
+  kUnsupported,   //!< no kernel supported it (left at its input position)
+  kOffSurface,    //!< dropped before the projection by the off-surface test
+  kSparse,        //!< dropped before the projection: its own kernel's support is below tau
+};
+
+//! True for the states of points that were projected (converged or not).
+inline bool projected(ProjectionState s) {
+  return s == ProjectionState::kConverged || s == ProjectionState::kNotConverged;
+}
+
+//! Per point, in the order of the projected positions.
+struct Projected {
+  std::vector<float> L;                  //!< likelihood at the final position
+  std::vector<std::uint8_t> iterations;  //!< iterations done (at most 255)
+  std::vector<ProjectionState> state;
+  std::vector<Eigen::Vector3f> normal;  //!< n_bar at the end, oriented like the reference
+};
+
+//! Projects every point x[i] of d (in place), with kernels ks. `nref` holds each point's own
+//! kernel normal (zero if none): the reference orientation where d has no sensor normal.
+//! `sparse[i]` != 0 drops point i before the projection (state kSparse). With
+//! `off_surface_test`, and when ks kept its fits, the off-surface test runs first
+//! (FilterOptions::outlier_sigma).
+void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen::Vector3f>& nref,
+                 const FilterOptions& o, bool off_surface_test, bool oriented,
+                 const std::vector<std::uint8_t>& sparse, std::vector<Eigen::Vector3d>& x,
+                 Projected& out, const std::string& phase);
+
+}  // namespace scanclean::detail

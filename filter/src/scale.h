@@ -1,0 +1,35 @@
+#pragma once
+//! Internal: the scale phase, which chooses the kernel size (the paper's section 2, "choice of
+//! h"; FilterOptions::scale): a fixed h; the automatic h (the median K_h-th neighbour distance
+//! h0, raised to noise_factor x the noise sigma, then scale selection, scale_selection.h); or a
+//! per-point h_i (the k_adaptive-th neighbour distance).
+
+#include <Eigen/Core>
+#include <memory>
+#include <vector>
+
+#include "neighbor_index.h"
+#include "point_set.h"
+#include "scanclean/filter/filter_options.h"
+
+namespace scanclean::detail {
+
+struct ScaleChoice {
+  double h = 0;                 //!< the kernel size (kAdaptive: the median h_i)
+  double h_min = 0, h_max = 0;  //!< range of h_i (kAdaptive only)
+  double h0 = 0;                //!< kAuto: the median K_h-th neighbour distance
+  double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise
+  double noise_sigma_h0 = 0;    //!< kAuto: the same at h0
+  double h_noise = 0;           //!< kAuto: max(h0, noise_factor sigma), before scale selection
+  //! An index over pf with a cell between h and 1.7 h, when one was built on the way (else
+  //! null): the kernels phase reuses it.
+  std::unique_ptr<NeighborIndex> index;
+};
+
+//! Chooses h for the points `in` (input order; positions, sensor normals and weights set) whose
+//! float copies relative to the same origin are `pf`; `diag` is the bounding-box diagonal. Sets
+//! in.h, and in.hi for kAdaptive. Deterministic, parallel.
+ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, double diag,
+                         bool use_sensor_normals, const FilterOptions& o);
+
+}  // namespace scanclean::detail

@@ -1,0 +1,96 @@
+// The weighted PCA of the kernels (filter/src/kernel_fit.h) against a direct computation with
+// Eigen's iterative solver (the oracle), and its trimming of a near outlier.
+
+#include "../../filter/src/kernel_fit.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <random>
+
+namespace scanclean::detail {
+namespace {
+
+// Samples on a tilted plane with uniform noise of half-width `noise` along its normal (uniform,
+// so that no sample lies beyond the 3-sigma trimming band), chi-weighted for the radius h.
+std::vector<FitSample> plane_samples(int n, double h, double noise, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Eigen::Vector3d nrm = Eigen::Vector3d(0.3, -0.2, 1.0).normalized();
+  const Eigen::Vector3d t1 = nrm.unitOrthogonal(), t2 = nrm.cross(t1);
+  std::vector<FitSample> s;
+  while (static_cast<int>(s.size()) < n) {
+    const Eigen::Vector3d p = 0.9 * h * (u(rng) * t1 + u(rng) * t2) + noise * u(rng) * nrm;
+    const double r2 = p.squaredNorm();
+    if (!(r2 < h * h)) continue;
+    double t = 1 - r2 / (h * h);
+    t *= t;
+    t *= t;
+    s.push_back({p.x(), p.y(), p.z(), t});
+  }
+  return s;
+}
+
+struct Direct {
+  Eigen::Vector3d m;
+  Eigen::Matrix3d cov;
+  double weight;
+};
+
+Direct direct_fit(const std::vector<FitSample>& s) {
+  Direct d{Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero(), 0};
+  for (const FitSample& q : s) {
+    d.weight += q.t;
+    d.m += q.t * Eigen::Vector3d(q.x, q.y, q.z);
+  }
+  d.m /= d.weight;
+  for (const FitSample& q : s) {
+    const Eigen::Vector3d r = Eigen::Vector3d(q.x, q.y, q.z) - d.m;
+    d.cov += q.t * r * r.transpose();
+  }
+  d.cov /= d.weight;
+  return d;
+}
+
+TEST(KernelFitTest, MatchesTheDirectWeightedPca) {
+  const double h = 0.01;
+  std::vector<FitSample> s = plane_samples(200, h, 0.0004, 11);
+  const Direct ref = direct_fit(s);
+  const Eigen::Vector3d centre(1.0, 2.0, 3.0);
+  KernelFit fit;
+  ASSERT_TRUE(fit_samples(s, centre, h, 8, 0.05, fit));
+  EXPECT_EQ(s.size(), 200u);  // nothing beyond the trimming band
+  EXPECT_NEAR(fit.weight, ref.weight, 1e-12 * ref.weight);
+  EXPECT_LT((fit.m - ref.m).norm(), 1e-15);
+  EXPECT_LT((fit.c - (centre + ref.m)).norm(), 1e-12);
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(ref.cov);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(fit.lambda[k], es.eigenvalues()[k], 1e-9 * h * h);
+  // The normal is the eigenvector of the smallest eigenvalue (either sign).
+  EXPECT_NEAR(std::abs(fit.e.col(0).dot(es.eigenvectors().col(0))), 1.0, 1e-9);
+}
+
+TEST(KernelFitTest, TrimsANearOutlierFromTheFit) {
+  const double h = 0.01;
+  std::vector<FitSample> clean = plane_samples(150, h, 0.0002, 12);
+  const Direct ref = direct_fit(clean);
+  std::vector<FitSample> s = clean;
+  // A point half-way out of the ball, 0.4 h off the plane: far outside 3 standard deviations.
+  const Eigen::Vector3d nrm = Eigen::Vector3d(0.3, -0.2, 1.0).normalized();
+  const Eigen::Vector3d p = 0.3 * h * nrm.unitOrthogonal() + 0.4 * h * nrm;
+  s.push_back({p.x(), p.y(), p.z(), std::pow(1 - p.squaredNorm() / (h * h), 4)});
+  KernelFit fit;
+  ASSERT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), h, 8, 0.05, fit));
+  EXPECT_EQ(s.size(), clean.size());
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
+}
+
+TEST(KernelFitTest, TooFewSamplesGiveNoFit) {
+  std::vector<FitSample> s = plane_samples(7, 0.01, 0.0002, 13);
+  KernelFit fit;
+  EXPECT_FALSE(fit_samples(s, Eigen::Vector3d::Zero(), 0.01, 8, 0.05, fit));
+  EXPECT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), 0.01, 7, 0.05, fit));
+}
+
+}  // namespace
+}  // namespace scanclean::detail

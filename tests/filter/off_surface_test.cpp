@@ -1,0 +1,73 @@
+// The off-surface test's leave-one-out downdate (filter/src/off_surface.h) against a full refit
+// without the points taken out (the oracle).
+
+#include "../../filter/src/off_surface.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "../../filter/src/kernel_fit.h"
+
+namespace scanclean::detail {
+namespace {
+
+struct Moments {
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  double w = 0;
+};
+
+Moments refit(const std::vector<Eigen::Vector3d>& p, const std::vector<double>& t,
+              const std::vector<bool>& skip) {
+  Moments r;
+  for (std::size_t k = 0; k < p.size(); ++k)
+    if (!skip[k]) {
+      r.w += t[k];
+      r.m += t[k] * p[k];
+    }
+  r.m /= r.w;
+  for (std::size_t k = 0; k < p.size(); ++k)
+    if (!skip[k]) r.cov += t[k] * (p[k] - r.m) * (p[k] - r.m).transpose();
+  r.cov /= r.w;
+  return r;
+}
+
+TEST(OffSurfaceTest, DowndateEqualsAFullRefitWithoutThePoints) {
+  std::mt19937 rng(21);
+  std::normal_distribution<double> g(0.0, 1.0);
+  std::uniform_real_distribution<double> u(0.05, 1.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    const int n = 20 + trial;
+    std::vector<Eigen::Vector3d> p(n);
+    std::vector<double> t(n);
+    for (int k = 0; k < n; ++k) {
+      p[k] = Eigen::Vector3d(g(rng), g(rng), 0.1 * g(rng)) * 1e-3;
+      t[k] = u(rng);
+    }
+    std::vector<bool> skip(n, false);
+    Moments fit = refit(p, t, skip);
+    // Take out two samples, one after the other, as the test does (the point, then the centre).
+    for (int k : {trial % n, (trial * 7 + 3) % n}) {
+      if (skip[k]) continue;
+      ASSERT_TRUE(downdate_fit(fit.m, fit.cov, fit.w, p[k], t[k], 1e-3 * fit.w));
+      skip[k] = true;
+      const Moments ref = refit(p, t, skip);
+      EXPECT_NEAR(fit.w, ref.w, 1e-12 * ref.w);
+      EXPECT_LT((fit.m - ref.m).norm(), 1e-12 * 1e-3);
+      EXPECT_LT((fit.cov - ref.cov).norm(), 1e-10 * ref.cov.norm()) << "trial " << trial;
+    }
+  }
+}
+
+TEST(OffSurfaceTest, DowndateRefusesToEmptyTheFit) {
+  Eigen::Vector3d m(1, 2, 3);
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Identity();
+  double w = 1.0;
+  EXPECT_FALSE(downdate_fit(m, cov, w, Eigen::Vector3d(1, 2, 3), 1.0, 1e-3));
+  EXPECT_EQ(w, 1.0);
+  EXPECT_EQ(m, Eigen::Vector3d(1, 2, 3));
+}
+
+}  // namespace
+}  // namespace scanclean::detail

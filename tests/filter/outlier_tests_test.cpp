@@ -1,0 +1,161 @@
+// The outlier tests after the projection (filter/src/outlier_tests.h) against brute-force
+// oracles over all pairs: the density test, the likelihood-ratio test (the lower quartile by
+// sorting) and the small-component test (union-find over all pairs), and the support test.
+
+#include "../../filter/src/outlier_tests.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+#include "../../filter/src/parallel.h"
+
+namespace scanclean::detail {
+namespace {
+
+// Representatives of their own (one member each, seed i = point i): a dense patch, a sparse
+// fringe, a few isolated points and a small far clump, with random likelihoods.
+struct Scene {
+  std::vector<Eigen::Vector3d> x;
+  Projected pr;
+  Clusters cl;
+  PointSet d;
+  std::vector<std::uint32_t> input_index;
+};
+
+Scene make_scene(std::uint32_t seed, double h) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::uniform_real_distribution<float> l(0.5f, 1.5f);
+  Scene s;
+  auto add = [&](const Eigen::Vector3d& p, float L) {
+    const auto i = static_cast<std::uint32_t>(s.x.size());
+    s.x.push_back(p);
+    s.pr.L.push_back(L);
+    s.pr.iterations.push_back(2);
+    s.pr.state.push_back(ProjectionState::kConverged);
+    s.pr.normal.push_back(Eigen::Vector3f(0, 0, 1));
+    s.cl.seed.push_back(i);
+    s.cl.count.push_back(1 + i % 3);
+    s.cl.position.push_back(p);
+    s.cl.rep_of.push_back(i);
+    s.input_index.push_back(i);
+  };
+  for (int k = 0; k < 900; ++k) add(Eigen::Vector3d(u(rng), u(rng), 0.01 * u(rng)) * 5 * h, l(rng));
+  for (int k = 0; k < 60; ++k) add(Eigen::Vector3d(6 + u(rng), u(rng), 0) * 5 * h, l(rng));
+  for (int k = 0; k < 20; ++k) add(Eigen::Vector3d(u(rng), u(rng), 0.01) * 5 * h, 0.05f * l(rng));
+  for (int k = 0; k < 5; ++k) add(Eigen::Vector3d(20 + 0.1 * u(rng), 0, 0) * 5 * h, l(rng));
+  s.d.h = h;
+  s.d.p = s.x;
+  return s;
+}
+
+RepresentativeTestInput input_of(const Scene& s, double h) {
+  RepresentativeTestInput in;
+  in.clusters = &s.cl;
+  in.x = &s.x;
+  in.projected = &s.pr;
+  in.points = &s.d;
+  in.input_positions = &s.x;  // no move: the displacement test is off here
+  in.input_index = &s.input_index;
+  in.cell = h;
+  in.stride = 1;
+  in.points_in = s.x.size();
+  return in;
+}
+
+std::vector<std::vector<std::size_t>> neighbours(const Scene& s, double h) {
+  const std::size_t n = s.x.size();
+  std::vector<std::vector<std::size_t>> nb(n);
+  for (std::size_t a = 0; a < n; ++a)
+    for (std::size_t b = 0; b < n; ++b)
+      if ((s.x[a].cast<float>() - s.x[b].cast<float>()).squaredNorm() <
+          static_cast<float>(h) * static_cast<float>(h))
+        nb[a].push_back(b);
+  return nb;
+}
+
+FilterOptions only(double tau, double ratio, bool components) {
+  FilterOptions o;
+  o.tau = tau;
+  o.likelihood_ratio = ratio;
+  o.displacement_sigma = 0;
+  o.remove_small_components = components;
+  return o;
+}
+
+TEST(OutlierTestsTest, DensityTestMatchesBruteForce) {
+  const double h = 0.01;
+  const Scene s = make_scene(3, h);
+  const auto nb = neighbours(s, h);
+  std::vector<double> rho(s.x.size(), 0);
+  for (std::size_t a = 0; a < nb.size(); ++a)
+    for (std::size_t b : nb[a]) rho[a] += s.cl.count[b];
+  const double limit = 0.3 * median_of(rho);
+  const std::vector<Removal> got = test_representatives(input_of(s, h), only(0.3, 0, false));
+  std::size_t removed = 0;
+  for (std::size_t a = 0; a < rho.size(); ++a) {
+    EXPECT_EQ(got[a] == Removal::kLowDensity, rho[a] < limit) << a;
+    removed += got[a] != Removal::kKept;
+  }
+  EXPECT_GT(removed, 0u);
+}
+
+TEST(OutlierTestsTest, LikelihoodRatioTestMatchesTheLowerQuartile) {
+  const double h = 0.01;
+  const Scene s = make_scene(4, h);
+  const auto nb = neighbours(s, h);
+  const std::vector<Removal> got = test_representatives(input_of(s, h), only(0, 0.25, false));
+  std::size_t removed = 0;
+  for (std::size_t a = 0; a < nb.size(); ++a) {
+    std::vector<float> l;
+    for (std::size_t b : nb[a]) l.push_back(s.pr.L[b]);
+    std::sort(l.begin(), l.end());
+    const float q1 = l[l.size() / 4];
+    EXPECT_EQ(got[a] == Removal::kLowLikelihood, s.pr.L[a] < 0.25 * q1) << a;
+    removed += got[a] != Removal::kKept;
+  }
+  EXPECT_GE(removed, 15u);  // the 20 low-likelihood points among the dense patch
+}
+
+TEST(OutlierTestsTest, SmallComponentsMatchUnionFindOverAllPairs) {
+  const double h = 0.01;
+  const Scene s = make_scene(5, h);
+  const auto nb = neighbours(s, h);
+  const std::size_t n = s.x.size();
+  std::vector<std::size_t> comp(n);
+  std::iota(comp.begin(), comp.end(), 0);
+  for (bool changed = true; changed;) {  // label propagation to the smallest index
+    changed = false;
+    for (std::size_t a = 0; a < n; ++a)
+      for (std::size_t b : nb[a])
+        if (comp[b] < comp[a]) {
+          comp[a] = comp[b];
+          changed = true;
+        }
+  }
+  std::vector<std::uint64_t> size(n, 0);
+  for (std::size_t a = 0; a < n; ++a) size[comp[a]] += s.cl.count[a];
+  FilterOptions o = only(0, 0, true);
+  o.min_component_size = 30;
+  const std::vector<Removal> got = test_representatives(input_of(s, h), o);
+  std::size_t removed = 0;
+  for (std::size_t a = 0; a < n; ++a) {
+    EXPECT_EQ(got[a] == Removal::kSmallComponent, size[comp[a]] < 30) << a;
+    removed += got[a] != Removal::kKept;
+  }
+  EXPECT_GE(removed, 5u);  // at least the far clump
+}
+
+TEST(OutlierTestsTest, SparseSupportUsesTheMedianOverKernels) {
+  const std::vector<float> support = {10, -1, 2, 9, 11, 0.5f, -1, 12};
+  // Median over the six kernels (lower median: 9), limit 0.3 x 9 = 2.7.
+  const std::vector<std::uint8_t> s = sparse_support(support, 0.3);
+  EXPECT_EQ(s, (std::vector<std::uint8_t>{0, 0, 1, 0, 0, 1, 0, 0}));
+  EXPECT_EQ(sparse_support(support, 0), std::vector<std::uint8_t>(support.size(), 0));
+}
+
+}  // namespace
+}  // namespace scanclean::detail
