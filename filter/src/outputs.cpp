@@ -16,6 +16,16 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
   FilterStats& st = result.stats;
   const std::size_t N = input.size();
   const std::size_t R = cl.seed.size();
+  auto mult = [&](std::size_t s) -> std::size_t {
+    return in.multiplicity ? (*in.multiplicity)[src[s]] : 1;
+  };
+  // Input points each representative stands for.
+  std::vector<std::uint64_t> members(cl.count.begin(), cl.count.end());
+  if (in.multiplicity) {
+    std::fill(members.begin(), members.end(), 0);
+    for (std::size_t s = 0; s < N; ++s)
+      if (cl.rep_of[s] != kNone) members[cl.rep_of[s]] += mult(s);
+  }
   // Output points in the input order of their seeds (seeds are distinct input points).
   std::vector<std::uint32_t> kept;
   {
@@ -43,7 +53,7 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       L[k] = pr.L[s];
       it[k] = pr.iterations[s];
       fl[k] = pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0;
-      mc[k] = cl.count[r];
+      mc[k] = static_cast<double>(members[r]);
       si[k] = src[s];
     });
     out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
@@ -52,7 +62,7 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     out.set_attribute("merge_count", AttributeType::kUInt32, std::move(mc));
     out.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
     st.points_out = kept.size();
-    for (std::uint32_t r : kept) st.merged += cl.count[r] - 1;
+    for (std::uint32_t r : kept) st.merged += members[r] - 1;
   }
   {
     std::vector<std::uint8_t> in_flag(N, 0);
@@ -60,15 +70,15 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       switch (pr.state[s]) {
         case ProjectionState::kUnsupported:
           in_flag[src[s]] = kFlagUnsupported;
-          ++st.unsupported;
+          st.unsupported += mult(s);
           continue;
         case ProjectionState::kOffSurface:
           in_flag[src[s]] = kFlagOutlier;
-          ++st.off_surface;
+          st.off_surface += mult(s);
           continue;
         case ProjectionState::kSparse:
           in_flag[src[s]] = kFlagOutlier;
-          ++st.low_density;
+          st.low_density += mult(s);
           continue;
         case ProjectionState::kConverged:
         case ProjectionState::kNotConverged:
@@ -80,17 +90,17 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
           kFlagOutlier | (pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0));
       switch (why) {
         case Removal::kSmallComponent:
-          ++st.small_components;
+          st.small_components += mult(s);
           break;
         case Removal::kLowLikelihood:
-          ++st.low_likelihood;
+          st.low_likelihood += mult(s);
           break;
         case Removal::kDisplaced:
-          ++st.displaced;
+          st.displaced += mult(s);
           break;
         case Removal::kLowDensity:
         case Removal::kKept:
-          ++st.low_density;
+          st.low_density += mult(s);
           break;
       }
     }

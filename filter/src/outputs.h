@@ -21,6 +21,9 @@ struct OutputInput {
   const Projected* projected = nullptr;                     //!< per point (grid order)
   const std::vector<std::uint32_t>* input_index = nullptr;  //!< per point: its input index
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();         //!< added back to the positions
+  //! Optional, per input point: how many input points it stands for (coincident points merged
+  //! before filtering, input_groups.h); merge counts and the statistics count them all.
+  const std::vector<std::uint32_t>* multiplicity = nullptr;
 };
 
 //! Fills result.cloud and result.outliers (robust_filter.h documents both) and the counts of

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "clustering.h"
+#include "input_groups.h"
 #include "kernels.h"
 #include "neighbor_index.h"
 #include "outlier_tests.h"
@@ -190,22 +191,16 @@ void iteration_stats(const detail::Projected& pr, FilterStats& st) {
   }
 }
 
-// The filter, in the order of the paper's outline. Three index spaces: input points (input
-// order), points (the grid order of the spatial sort; input_index maps a point to its input
-// index) and representatives (clusters).
-FilterResult run(const PointCloud& input, const FilterOptions& o) {
-  const auto t_start = Clock::now();
+// The filter on one group of distinct points (input_groups.h), in the order of the paper's
+// outline. Three index spaces: input points (input order), points (the grid order of the spatial
+// sort; input_index maps a point to its input index) and representatives (clusters).
+// `multiplicity` (optional): the input points each point stands for.
+FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use_w, bool use_v,
+                       const std::vector<std::uint32_t>* multiplicity) {
   FilterResult result;
   FilterStats& st = result.stats;
   const std::size_t N = input.size();
   st.points_in = N;
-  st.threads = tbb::this_task_arena::max_concurrency();
-  if (N == 0) {
-    st.peak_rss_bytes = peak_rss_bytes();
-    return result;
-  }
-  bool use_w = false, use_v = false;
-  check_input(input, o, use_w, use_v);
 
   // 1. Scale: h (or h_i), in a local frame around the bounding box's centre.
   auto t = Clock::now();
@@ -310,11 +305,58 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   oi.projected = &pr;
   oi.input_index = &input_index;
   oi.origin = origin;
+  oi.multiplicity = multiplicity;
   detail::write_outputs(oi, result);
   st.seconds_outliers = seconds_since(t);
   detail::report(o, "outliers", 1);
-  st.seconds_total = seconds_since(t_start);
-  st.peak_rss_bytes = peak_rss_bytes();
+  return result;
+}
+
+// The filter on distinct points: the bulk and, separately, the points far from it
+// (input_groups.h).
+FilterResult run_split(const PointCloud& input, const FilterOptions& o, bool use_w, bool use_v,
+                       const std::vector<std::uint32_t>* multiplicity) {
+  const detail::FarSplit split = detail::split_far_points(input);
+  if (split.far.empty()) return run_group(input, o, use_w, use_v, multiplicity);
+  auto part = [&](const std::vector<std::size_t>& idx, auto&& filter) {
+    PointCloud sub = select(input, idx);
+    sub.grid = OrganizedGrid{};
+    std::vector<std::uint32_t> mult;
+    if (multiplicity)
+      for (std::size_t i : idx) mult.push_back((*multiplicity)[i]);
+    return filter(sub, multiplicity ? &mult : nullptr);
+  };
+  std::vector<FilterResult> parts;
+  parts.push_back(part(split.near, [&](const PointCloud& c, const std::vector<std::uint32_t>* m) {
+    return run_group(c, o, use_w, use_v, m);
+  }));
+  parts.push_back(part(split.far, [&](const PointCloud& c, const std::vector<std::uint32_t>* m) {
+    return run_split(c, o, use_w, use_v, m);
+  }));
+  return detail::merge_parts(std::move(parts), {split.near, split.far});
+}
+
+FilterResult run(const PointCloud& input, const FilterOptions& o) {
+  const auto t_start = Clock::now();
+  const std::size_t N = input.size();
+  FilterResult result;
+  if (N > 0) {
+    bool use_w = false, use_v = false;
+    check_input(input, o, use_w, use_v);
+    const detail::Coincident coincident = detail::find_coincident(input);
+    if (coincident.any()) {
+      PointCloud distinct = select(input, coincident.first);
+      distinct.grid = OrganizedGrid{};
+      result = run_split(distinct, o, use_w, use_v, &coincident.count);
+      detail::expand_coincident(input, coincident, result);
+    } else {
+      result = run_split(input, o, use_w, use_v, nullptr);
+    }
+  }
+  result.stats.points_in = N;
+  result.stats.threads = tbb::this_task_arena::max_concurrency();
+  result.stats.seconds_total = seconds_since(t_start);
+  result.stats.peak_rss_bytes = peak_rss_bytes();
   return result;
 }
 

@@ -6,6 +6,14 @@
 //! clustering of the converged points and density-threshold outlier removal.
 //!
 //! Implementation notes (choices where the spec leaves room):
+//!  - Coincident points (bitwise equal positions) are one observation: the phases run on the
+//!    first copy of each position, and the other copies follow its fate (merged into its output
+//!    point, merge_count counting them, or removed with it). Copies therefore neither shrink the
+//!    automatic h nor cost quadratic time; a cloud of one position is one unsupported point.
+//!  - Points far outside the bulk (beyond the box of the 1st to 99th percentiles grown by four
+//!    times its size on every side) are filtered as a group of their own with the same options,
+//!    so that a stray point at 1e7 m leaves the local float frame and the grid of the rest as
+//!    they are (filter/src/input_groups.h).
 //!  - Automatic h: the K_h-th neighbour distances are exact (grid radius queries); a k-d tree
 //!    over a subsample only sizes the grid. If they are all 0 (K_h + 1 coincident points), h
 //!    falls back to 1e-3 x the bounding-box diagonal (1 mm for a single location).

@@ -1,0 +1,170 @@
+#include "input_groups.h"
+
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numeric>
+
+#include "parallel.h"
+
+namespace scanclean::detail {
+namespace {
+
+std::uint64_t bits_of(double v) {
+  if (v == 0) v = 0;  // -0 and +0 are one position
+  std::uint64_t b;
+  std::memcpy(&b, &v, sizeof b);
+  return b;
+}
+
+// Sorts the points by their source_index attribute and rewrites it through `to_input`.
+void remap_sources(PointCloud& cloud, const std::vector<std::size_t>& to_input) {
+  Attribute* si = cloud.find_attribute("source_index");
+  if (!si) return;
+  for (double& v : si->values) v = static_cast<double>(to_input[static_cast<std::size_t>(v)]);
+}
+
+PointCloud sorted_by_source(const PointCloud& cloud) {
+  const Attribute* si = cloud.find_attribute("source_index");
+  std::vector<std::size_t> order(cloud.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  if (si)
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return si->values[a] < si->values[b]; });
+  PointCloud out = select(cloud, order);
+  out.grid = OrganizedGrid{};
+  return out;
+}
+
+}  // namespace
+
+Coincident find_coincident(const PointCloud& input) {
+  const std::size_t n = input.size();
+  Coincident c;
+  c.group_of.resize(n);
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  const auto& p = input.positions;
+  auto less = [&](std::uint32_t a, std::uint32_t b) {
+    for (int k = 0; k < 3; ++k) {
+      const std::uint64_t x = bits_of(p[a][k]), y = bits_of(p[b][k]);
+      if (x != y) return x < y;
+    }
+    return a < b;
+  };
+  tbb::parallel_sort(order.begin(), order.end(), less);
+  auto same = [&](std::uint32_t a, std::uint32_t b) {
+    for (int k = 0; k < 3; ++k)
+      if (bits_of(p[a][k]) != bits_of(p[b][k])) return false;
+    return true;
+  };
+  // Groups in the order of their first input index.
+  std::vector<std::uint32_t> head(n);  // per input point: the first index of its group
+  for (std::size_t k = 0; k < n; ++k)
+    head[order[k]] = (k > 0 && same(order[k - 1], order[k])) ? head[order[k - 1]] : order[k];
+  std::vector<std::uint32_t> group_at(n, kNone);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (head[i] == i) {
+      group_at[i] = static_cast<std::uint32_t>(c.first.size());
+      c.first.push_back(i);
+      c.count.push_back(0);
+    }
+    c.group_of[i] = group_at[head[i]];
+    ++c.count[c.group_of[i]];
+  }
+  return c;
+}
+
+FarSplit split_far_points(const PointCloud& input) {
+  FarSplit split;
+  const std::size_t n = input.size();
+  const std::size_t m = std::min<std::size_t>(n, 10000);
+  Eigen::Vector3d lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    std::vector<double> v(m);
+    for (std::size_t k = 0; k < m; ++k) v[k] = input.positions[k * n / m][a];
+    const auto q = [&](double f) {
+      const auto it = v.begin() + static_cast<std::ptrdiff_t>(f * static_cast<double>(m - 1));
+      std::nth_element(v.begin(), it, v.end());
+      return *it;
+    };
+    lo[a] = q(0.01);
+    hi[a] = q(0.99);
+  }
+  const double size = (hi - lo).maxCoeff();
+  // A box of zero size (most points at one position) grows by a millimetre.
+  const double margin = 4 * std::max(size, 1e-3);
+  lo -= Eigen::Vector3d::Constant(margin);
+  hi += Eigen::Vector3d::Constant(margin);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d& p = input.positions[i];
+    const bool inside = (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all();
+    (inside ? split.near : split.far).push_back(i);
+  }
+  return split;
+}
+
+void expand_coincident(const PointCloud& input, const Coincident& c, FilterResult& r) {
+  remap_sources(r.cloud, c.first);
+  // Removed: every copy of a removed distinct point, with its flags, in input order.
+  const Attribute* si = r.outliers.find_attribute("source_index");
+  const Attribute* fl = r.outliers.find_attribute("flags");
+  std::vector<double> flag_of(c.first.size(), 0);
+  for (std::size_t k = 0; k < r.outliers.size(); ++k)
+    flag_of[static_cast<std::size_t>(si->values[k])] = fl->values[k];
+  std::vector<std::size_t> idx;
+  for (std::size_t i = 0; i < input.size(); ++i)
+    if (flag_of[c.group_of[i]] != 0) idx.push_back(i);
+  PointCloud ol = select(input, idx);
+  ol.grid = OrganizedGrid{};
+  std::vector<double> flags(idx.size()), sources(idx.size());
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    flags[k] = flag_of[c.group_of[idx[k]]];
+    sources[k] = static_cast<double>(idx[k]);
+  }
+  ol.set_attribute("flags", AttributeType::kUInt8, std::move(flags));
+  ol.set_attribute("source_index", AttributeType::kUInt32, std::move(sources));
+  r.outliers = std::move(ol);
+  r.stats.points_in = input.size();
+}
+
+FilterResult merge_parts(std::vector<FilterResult> parts,
+                         const std::vector<std::vector<std::size_t>>& indices) {
+  FilterResult out;
+  out.stats = parts.front().stats;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    remap_sources(parts[k].cloud, indices[k]);
+    remap_sources(parts[k].outliers, indices[k]);
+    if (k == 0) continue;
+    const FilterStats& s = parts[k].stats;
+    FilterStats& t = out.stats;
+    t.points_in += s.points_in;
+    t.points_out += s.points_out;
+    t.unsupported += s.unsupported;
+    t.low_density += s.low_density;
+    t.off_surface += s.off_surface;
+    t.low_likelihood += s.low_likelihood;
+    t.displaced += s.displaced;
+    t.small_components += s.small_components;
+    t.merged += s.merged;
+    t.kernels += s.kernels;
+    t.not_converged += s.not_converged;
+    t.seconds_scale += s.seconds_scale;
+    t.seconds_kernels += s.seconds_kernels;
+    t.seconds_projection += s.seconds_projection;
+    t.seconds_clustering += s.seconds_clustering;
+    t.seconds_outliers += s.seconds_outliers;
+  }
+  PointCloud cloud = std::move(parts.front().cloud), outliers = std::move(parts.front().outliers);
+  for (std::size_t k = 1; k < parts.size(); ++k) {
+    append(cloud, parts[k].cloud);
+    append(outliers, parts[k].outliers);
+  }
+  out.cloud = sorted_by_source(cloud);
+  out.outliers = sorted_by_source(outliers);
+  return out;
+}
+
+}  // namespace scanclean::detail

@@ -1,0 +1,125 @@
+// Coincident and far points (filter/src/input_groups.h): the filter's answer on a cloud with
+// copies of its points, or with stray points far away, is its answer on the cloud without them;
+// the copies follow their point, the far points are filtered on their own.
+
+#include "../../filter/src/input_groups.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "scanclean/filter/robust_filter.h"
+#include "support/synthetic.h"
+
+namespace scanclean {
+namespace {
+
+const Attribute& attr(const PointCloud& c, const std::string& name) {
+  const Attribute* a = c.find_attribute(name);
+  EXPECT_NE(a, nullptr) << name;
+  static const Attribute none;
+  return a ? *a : none;
+}
+
+std::size_t total_merge_count(const FilterResult& r) {
+  double sum = 0;
+  for (double v : attr(r.cloud, "merge_count").values) sum += v;
+  return static_cast<std::size_t>(sum);
+}
+
+TEST(InputGroupsTest, CoincidentCopiesFollowTheirPoint) {
+  const PointCloud plane = test::noisy_plane(2000, 0.2, 0.001, 51);
+  // Every point 25 times, copies interleaved, plus 3 stray points (so some copies are removed).
+  PointCloud base = plane;
+  test::add_uniform_outliers(base, 3, -0.1, 0.1, 52);
+  PointCloud copies;
+  std::vector<std::size_t> order;
+  for (int k = 0; k < 25; ++k)
+    for (std::size_t i = 0; i < base.size(); ++i) order.push_back(i);
+  copies = select(base, order);
+  const FilterResult one = robust_filter(base);
+  const FilterResult many = robust_filter(copies);
+  EXPECT_EQ(many.stats.h, one.stats.h);  // copies do not shrink the automatic scale
+  ASSERT_EQ(many.cloud.size(), one.cloud.size());
+  for (std::size_t k = 0; k < one.cloud.size(); ++k) {
+    EXPECT_EQ(many.cloud.positions[k], one.cloud.positions[k]) << k;
+    EXPECT_EQ(attr(many.cloud, "source_index").values[k],
+              attr(one.cloud, "source_index").values[k]);
+    EXPECT_EQ(attr(many.cloud, "merge_count").values[k],
+              25 * attr(one.cloud, "merge_count").values[k]);
+  }
+  EXPECT_EQ(many.outliers.size(), 25 * one.outliers.size());
+  EXPECT_EQ(total_merge_count(many) + many.outliers.size(), copies.size());
+  EXPECT_EQ(many.stats.removed(), 25 * one.stats.removed());
+  EXPECT_EQ(many.stats.points_in, copies.size());
+  // Every removed copy carries its point's flags and its own input index.
+  const auto& si = attr(many.outliers, "source_index").values;
+  for (std::size_t k = 0; k + 1 < si.size(); ++k) EXPECT_LT(si[k], si[k + 1]);
+}
+
+TEST(InputGroupsTest, ManyPointsAtOnePositionAreOneUnsupportedPoint) {
+  PointCloud c;
+  c.positions.assign(100000, Eigen::Vector3d(1.5, -2, 0.25));
+  const FilterResult r = robust_filter(c);  // was quadratic: every copy every other's neighbour
+  EXPECT_EQ(r.cloud.size(), 0u);
+  EXPECT_EQ(r.stats.unsupported, c.size());
+  EXPECT_EQ(r.outliers.size(), c.size());
+}
+
+void expect_same_as_without(const PointCloud& plane, const FilterOptions& o, double far) {
+  PointCloud with = plane;
+  with.positions.insert(with.positions.begin() + 700, Eigen::Vector3d(far, -far, far));
+  if (with.has_normals()) with.normals.insert(with.normals.begin() + 700, Eigen::Vector3f(0, 0, 1));
+  const FilterResult a = robust_filter(plane, o);
+  const FilterResult b = robust_filter(with, o);
+  ASSERT_EQ(b.cloud.size(), a.cloud.size()) << "far point at " << far;
+  EXPECT_GT(a.cloud.size(), plane.size() / 2);
+  for (std::size_t k = 0; k < a.cloud.size(); ++k) {
+    EXPECT_EQ(b.cloud.positions[k], a.cloud.positions[k]);
+    const double s = attr(a.cloud, "source_index").values[k];
+    EXPECT_EQ(attr(b.cloud, "source_index").values[k], s < 700 ? s : s + 1);
+  }
+  EXPECT_EQ(b.stats.h, a.stats.h);
+  EXPECT_EQ(b.stats.unsupported, a.stats.unsupported + 1);
+  // The far point is removed as unsupported, at its input position.
+  bool found = false;
+  for (std::size_t k = 0; k < b.outliers.size(); ++k)
+    if (attr(b.outliers, "source_index").values[k] == 700) {
+      found = true;
+      EXPECT_EQ(attr(b.outliers, "flags").values[k], kFlagUnsupported);
+      EXPECT_EQ(b.outliers.positions[k], with.positions[700]);
+    }
+  EXPECT_TRUE(found);
+  for (const auto& p : b.cloud.positions) EXPECT_TRUE(p.allFinite());
+}
+
+TEST(InputGroupsTest, OneFarPointChangesNothingElse) {
+  const PointCloud plane = test::noisy_plane(2000, 0.2, 0.001, 53);
+  for (double far : {1e7, 1e25}) expect_same_as_without(plane, FilterOptions{}, far);
+  FilterOptions fixed;
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = 0.02;
+  expect_same_as_without(plane, fixed, 1e12);
+}
+
+TEST(InputGroupsTest, AFarClusterIsFilteredOnItsOwn) {
+  // Two planes 10 km apart, the far one under 1 % of the points (outside the percentile box):
+  // each is filtered with its own h.
+  const PointCloud near = test::noisy_plane(5000, 0.2, 0.001, 54);
+  PointCloud far = test::noisy_plane(40, 0.05, 0.0003, 55);
+  for (auto& p : far.positions) p += Eigen::Vector3d(1e4, 0, 0);
+  PointCloud both = near;
+  append(both, far);
+  const FilterResult r = robust_filter(both);
+  const detail::FarSplit split = detail::split_far_points(both);
+  EXPECT_EQ(split.far.size(), far.size());
+  std::size_t out_far = 0;
+  for (const auto& p : r.cloud.positions) out_far += p.x() > 5e3 ? 1 : 0;
+  EXPECT_GT(out_far, far.size() / 2);  // the far plane survives as a surface of its own
+  EXPECT_EQ(total_merge_count(r) + r.outliers.size(), both.size());
+  const FilterResult alone = robust_filter(near);
+  EXPECT_EQ(r.stats.h, alone.stats.h);
+}
+
+}  // namespace
+}  // namespace scanclean
