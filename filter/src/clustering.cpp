@@ -13,7 +13,7 @@
 namespace scanclean::detail {
 namespace {
 
-// Open-addressing map from a 63-bit cell key to the head of a list (sequential use only).
+// Open-addressing map from a 63-bit cell key to a value (built sequentially, then read).
 class CellMap {
  public:
   explicit CellMap(std::size_t expected) {
@@ -96,58 +96,168 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     return static_cast<std::int32_t>(
         std::clamp(std::floor((v - lo[a]) / cell), 0.0, static_cast<double>((1 << 21) - 1)));
   };
-  CellMap map(cand.size());
-  std::vector<std::uint32_t> next;  // per representative: next one in the same cell
-  std::vector<double> lsum;
+  // The greedy rule visits the candidates in rank order (decreasing L); candidate k becomes a
+  // representative exactly when no earlier representative that accepts members lies within eps
+  // of it (with agreeing normals): the lexicographically first maximal independent set of the
+  // graph of such pairs. It is computed in parallel rounds (a candidate is decided once every
+  // earlier neighbour is), then every other candidate joins its nearest earlier representative,
+  // and the positions are summed in rank order: the same clusters, bit for bit, as one sequential
+  // pass, for any thread count. Candidates that did not converge neither join nor accept.
+  const std::size_t nc = cand.size();
+  std::vector<std::uint8_t> joins(nc);
+  parallel_each(nc, [&](std::size_t k) {
+    joins[k] = pr.state[cand[k]] != ProjectionState::kNotConverged ? 1 : 0;
+  });
+  // Grid of the candidates that join: (cell key, rank) sorted, a map from key to its run.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell;
+  by_cell.reserve(nc);
+  for (std::size_t k = 0; k < nc; ++k)
+    if (joins[k]) {
+      const Eigen::Vector3d& p = x[cand[k]];
+      by_cell.push_back({cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)),
+                         static_cast<std::uint32_t>(k)});
+    }
+  tbb::parallel_sort(by_cell.begin(), by_cell.end());
+  CellMap map(by_cell.size());
+  for (std::size_t j = by_cell.size(); j-- > 0;)
+    map.at(by_cell[j].first, 0) = static_cast<std::uint32_t>(j);
   const double eps2 = eps * eps;
-  for (std::uint32_t i : cand) {
-    const Eigen::Vector3d& p = x[i];
-    std::uint32_t best = kNone;
-    const bool can_join = pr.state[i] != ProjectionState::kNotConverged;
-    if (can_join) {
-      double best_d2 = eps2;
-      std::int32_t a0[3], a1[3];
-      for (int a = 0; a < 3; ++a) {
-        a0[a] = coord(p[a] - eps, a);
-        a1[a] = coord(p[a] + eps, a);
-      }
-      for (std::int32_t cz = a0[2]; cz <= a1[2]; ++cz)
-        for (std::int32_t cy = a0[1]; cy <= a1[1]; ++cy)
-          for (std::int32_t cx = a0[0]; cx <= a1[0]; ++cx) {
-            const std::uint32_t* head = map.find(cell_key(cx, cy, cz));
-            for (std::uint32_t r = head ? *head : kNone; r != kNone; r = next[r]) {
-              const std::uint32_t s = cl.seed[r];
-              const double d2 = (x[s] - p).squaredNorm();
-              if (!(d2 < eps2)) continue;
-              if (oriented && !(pr.normal[s].dot(pr.normal[i]) > 0)) continue;
-              if (best == kNone || d2 < best_d2 || (d2 == best_d2 && r < best)) {
-                best = r;
-                best_d2 = d2;
-              }
-            }
+  // Earlier neighbours of each joining candidate (rank < k, within eps, normals agreeing), with
+  // their squared distances, in compressed rows (counted, then filled).
+  auto for_each_earlier = [&](std::size_t k, auto&& f) {
+    const Eigen::Vector3d& p = x[cand[k]];
+    std::int32_t a0[3], a1[3];
+    for (int a = 0; a < 3; ++a) {
+      a0[a] = coord(p[a] - eps, a);
+      a1[a] = coord(p[a] + eps, a);
+    }
+    for (std::int32_t cz = a0[2]; cz <= a1[2]; ++cz)
+      for (std::int32_t cy = a0[1]; cy <= a1[1]; ++cy)
+        for (std::int32_t cx = a0[0]; cx <= a1[0]; ++cx) {
+          const std::uint64_t key = cell_key(cx, cy, cz);
+          const std::uint32_t* start = map.find(key);
+          if (!start) continue;
+          for (std::size_t j = *start; j < by_cell.size() && by_cell[j].first == key; ++j) {
+            const std::uint32_t q = by_cell[j].second;
+            if (q >= k) continue;
+            const std::uint32_t s = cand[q];
+            const double d2 = (x[s] - p).squaredNorm();
+            if (!(d2 < eps2)) continue;
+            if (oriented && !(pr.normal[s].dot(pr.normal[cand[k]]) > 0)) continue;
+            f(q, d2);
           }
-    }
-    const double li = std::max(0.0, static_cast<double>(pr.L[i]));
-    if (best != kNone) {
-      cl.rep_of[i] = best;
-      cl.count[best] += 1;
-      cl.position[best] += li * p;
-      lsum[best] += li;
-      continue;
-    }
-    const auto r = static_cast<std::uint32_t>(cl.seed.size());
-    cl.rep_of[i] = r;
-    cl.seed.push_back(i);
-    cl.count.push_back(1);
-    cl.position.push_back(li * p);
-    lsum.push_back(li);
-    next.push_back(kNone);
-    if (can_join) {
-      std::uint32_t& head = map.at(cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)), kNone);
-      next[r] = head;
-      head = r;
-    }
+        }
+  };
+  // Both passes run in grid order (spatially coherent); the second only over the candidates
+  // that have earlier neighbours at all (after the projection, few of them).
+  std::vector<std::uint32_t> row(nc + 1, 0);
+  parallel_each(by_cell.size(), [&](std::size_t j) {
+    const std::uint32_t k = by_cell[j].second;
+    std::uint32_t m = 0;
+    for_each_earlier(k, [&](std::uint32_t, double) { ++m; });
+    row[k + 1] = m;
+  });
+  for (std::size_t k = 0; k < nc; ++k) row[k + 1] += row[k];
+  std::vector<std::uint32_t> nb(row[nc]);
+  std::vector<double> nb_d2(row[nc]);
+  parallel_each(by_cell.size(), [&](std::size_t j) {
+    const std::uint32_t k = by_cell[j].second;
+    std::uint32_t m = row[k];
+    if (m == row[k + 1]) return;
+    for_each_earlier(k, [&](std::uint32_t q, double d2) {
+      nb[m] = q;
+      nb_d2[m] = d2;
+      ++m;
+    });
+  });
+  // Rounds: a candidate with an earlier representative among its neighbours is a member; one
+  // whose earlier neighbours are all members is a representative.
+  enum : std::uint8_t { kUndecided, kRep, kMember };
+  std::vector<std::uint8_t> role(nc, kUndecided), next_role;
+  std::vector<std::uint32_t> open;
+  for (std::size_t k = 0; k < nc; ++k) {
+    if (!joins[k] || row[k] == row[k + 1])
+      role[k] = kRep;
+    else
+      open.push_back(static_cast<std::uint32_t>(k));
   }
+  auto decide = [&](std::uint32_t k, const std::vector<std::uint8_t>& from) {
+    bool all_members = true;
+    for (std::uint32_t m = row[k]; m < row[k + 1]; ++m) {
+      if (from[nb[m]] == kRep) return kMember;
+      all_members = all_members && from[nb[m]] == kMember;
+    }
+    return all_members ? kRep : kUndecided;
+  };
+  constexpr int kParallelRounds = 32;
+  for (int round = 0; round < kParallelRounds && !open.empty(); ++round) {
+    next_role = role;
+    parallel_each(open.size(), [&](std::size_t u) { next_role[open[u]] = decide(open[u], role); });
+    role.swap(next_role);
+    std::vector<std::uint32_t> still;
+    for (std::uint32_t k : open)
+      if (role[k] == kUndecided) still.push_back(k);
+    open.swap(still);
+  }
+  // Long chains of dependencies: the rest in rank order (each one's earlier neighbours are
+  // decided by then).
+  for (std::uint32_t k : open) role[k] = decide(k, role);
+  // Representatives in rank order; members join the nearest earlier one (ties: the earlier).
+  std::vector<std::uint32_t> rep_index(nc, kNone);
+  for (std::size_t k = 0; k < nc; ++k)
+    if (role[k] == kRep) {
+      rep_index[k] = static_cast<std::uint32_t>(cl.seed.size());
+      cl.seed.push_back(cand[k]);
+    }
+  const std::size_t R = cl.seed.size();
+  std::vector<std::uint32_t> joined(nc, kNone);  // per candidate: its representative
+  parallel_each(nc, [&](std::size_t k) {
+    if (role[k] == kRep) {
+      joined[k] = rep_index[k];
+      return;
+    }
+    std::uint32_t best = kNone;
+    double best_d2 = eps2;
+    for (std::uint32_t m = row[k]; m < row[k + 1]; ++m) {
+      const std::uint32_t r = rep_index[nb[m]];
+      if (r == kNone) continue;
+      const double d2 = nb_d2[m];
+      if (best == kNone || d2 < best_d2 || (d2 == best_d2 && r < best)) {
+        best = r;
+        best_d2 = d2;
+      }
+    }
+    joined[k] = best;
+  });
+  // Members of each representative in rank order (a counting sort, stable in rank), then each
+  // representative's L-weighted sum in that order.
+  std::vector<std::uint32_t> first(R + 1, 0), members(nc);
+  for (std::size_t k = 0; k < nc; ++k) ++first[joined[k] + 1];
+  for (std::size_t r = 0; r < R; ++r) first[r + 1] += first[r];
+  {
+    std::vector<std::uint32_t> fill(first.begin(), first.end() - 1);
+    for (std::size_t k = 0; k < nc; ++k) members[fill[joined[k]]++] = static_cast<std::uint32_t>(k);
+  }
+  cl.count.resize(R);
+  cl.position.resize(R);
+  std::vector<double> lsum(R);
+  parallel_each(R, [&](std::size_t r) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    double l = 0;
+    for (std::uint32_t m = first[r]; m < first[r + 1]; ++m) {
+      const std::uint32_t i = cand[members[m]];
+      const double li = std::max(0.0, static_cast<double>(pr.L[i]));
+      if (m == first[r])
+        sum = li * x[i];
+      else
+        sum += li * x[i];
+      l += li;
+      cl.rep_of[i] = static_cast<std::uint32_t>(r);
+    }
+    cl.count[r] = first[r + 1] - first[r];
+    cl.position[r] = sum;
+    lsum[r] = l;
+  });
   for (std::size_t r = 0; r < cl.seed.size(); ++r)
     cl.position[r] = lsum[r] > 0 ? Eigen::Vector3d(cl.position[r] / lsum[r]) : x[cl.seed[r]];
   return cl;
