@@ -1,0 +1,87 @@
+// The scale phase (filter/src/scale.h): per-point h_i against the k-th neighbour distance by
+// brute force (the oracle), the fixed h, and the automatic h0 against the brute-force median.
+
+#include "../../filter/src/scale.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "support/synthetic.h"
+
+namespace scanclean::detail {
+namespace {
+
+struct Input {
+  PointSet in;
+  std::vector<Eigen::Vector3f> pf;
+};
+
+Input input_of(const PointCloud& c) {
+  Input x;
+  for (const auto& p : c.positions) {
+    x.in.p.push_back(p);
+    x.pf.push_back(p.cast<float>());
+  }
+  return x;
+}
+
+// Distance from point i to its k-th nearest other point, in float as the index measures.
+double kth_distance(const std::vector<Eigen::Vector3f>& pf, std::size_t i, int k) {
+  std::vector<float> d;
+  for (std::size_t j = 0; j < pf.size(); ++j)
+    if (j != i) d.push_back((pf[j] - pf[i]).squaredNorm());
+  std::nth_element(d.begin(), d.begin() + (k - 1), d.end());
+  return std::sqrt(static_cast<double>(d[k - 1]));
+}
+
+TEST(ScaleTest, AdaptiveKernelSizesAreTheKthNeighbourDistances) {
+  // Two densities, so that h_i varies tenfold.
+  PointCloud c = test::noisy_plane(1500, 0.1, 0.0002, 61);
+  PointCloud sparse = test::noisy_plane(150, 0.1, 0.0002, 62);
+  for (auto& p : sparse.positions) p.x() += 0.1;
+  append(c, sparse);
+  Input x = input_of(c);
+  FilterOptions o;
+  o.scale = ScaleMode::kAdaptive;
+  o.k_adaptive = 20;
+  const ScaleChoice s = choose_scale(x.in, x.pf, 0.3, false, o);
+  ASSERT_EQ(x.in.hi.size(), x.pf.size());
+  for (std::size_t i = 0; i < x.pf.size(); i += 7)
+    EXPECT_NEAR(x.in.hi[i], kth_distance(x.pf, i, o.k_adaptive), 1e-7) << i;
+  std::vector<float> sorted = x.in.hi;
+  std::nth_element(sorted.begin(), sorted.begin() + (sorted.size() - 1) / 2, sorted.end());
+  EXPECT_EQ(s.h, static_cast<double>(sorted[(sorted.size() - 1) / 2]));
+  EXPECT_EQ(s.h_min, *std::min_element(x.in.hi.begin(), x.in.hi.end()));
+  EXPECT_GT(s.h_max, 2.5 * s.h_min);
+  EXPECT_EQ(x.in.h, s.h);
+}
+
+TEST(ScaleTest, FixedScaleIsTakenAsGiven) {
+  Input x = input_of(test::noisy_plane(500, 0.1, 0.0002, 63));
+  FilterOptions o;
+  o.scale = ScaleMode::kFixed;
+  o.h = 0.0123;
+  const ScaleChoice s = choose_scale(x.in, x.pf, 0.15, false, o);
+  EXPECT_EQ(s.h, 0.0123);
+  EXPECT_EQ(s.h_min, 0.0123);
+  EXPECT_EQ(s.h_max, 0.0123);
+  EXPECT_TRUE(x.in.hi.empty());
+}
+
+TEST(ScaleTest, AutomaticH0IsTheMedianKthNeighbourDistance) {
+  Input x = input_of(test::noisy_plane(3000, 0.1, 0.0, 64));  // noise-free: h stays near h0
+  FilterOptions o;
+  o.scale_gamma = 0;  // the noise rule alone
+  const ScaleChoice s = choose_scale(x.in, x.pf, 0.15, false, o);
+  std::vector<double> kd;
+  for (std::size_t i = 0; i < x.pf.size(); ++i) kd.push_back(kth_distance(x.pf, i, o.k_h));
+  std::nth_element(kd.begin(), kd.begin() + (kd.size() - 1) / 2, kd.end());
+  // Under 10,000 points every point is sampled: h0 is the exact median.
+  EXPECT_NEAR(s.h0, kd[(kd.size() - 1) / 2], 1e-7);
+  EXPECT_NEAR(s.noise_sigma, 0.0, 1e-6);
+  EXPECT_EQ(s.h, s.h0);  // no noise to raise it
+}
+
+}  // namespace
+}  // namespace scanclean::detail
