@@ -6,7 +6,6 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -16,6 +15,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/core/progress.h"
 #include "scanclean/drivers/make_range_source.h"
+#include "scanclean/interrupt.h"
 #include "scanclean/replay/recording_source.h"
 #include "scanclean/summary.h"
 #ifdef SCANCLEAN_HAVE_OPENNI2
@@ -23,25 +23,6 @@
 #endif
 
 namespace scanclean::app {
-
-#if defined(SCANCLEAN_HAVE_IO) && defined(SCANCLEAN_HAVE_FILTER) && defined(SCANCLEAN_HAVE_PIPELINE)
-// Defined in cmd_replay.cpp.
-void install_sigint_handler();
-bool interrupted();
-#else
-namespace {
-volatile std::sig_atomic_t g_record_interrupted = 0;
-extern "C" void on_record_sigint(int) {
-  g_record_interrupted = 1;
-}
-void install_sigint_handler() {
-  std::signal(SIGINT, on_record_sigint);
-}
-bool interrupted() {
-  return g_record_interrupted != 0;
-}
-}  // namespace
-#endif
 
 namespace {
 

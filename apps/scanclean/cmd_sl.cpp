@@ -22,6 +22,7 @@
 #endif
 #if defined(SCANCLEAN_HAVE_FILTER)
 #include "scanclean/filter/robust_filter.h"
+#include "scanclean/filter_options_cli.h"
 #endif
 #if defined(SCANCLEAN_HAVE_PIPELINE)
 #include "scanclean/pipeline/frame_to_points.h"
@@ -176,31 +177,14 @@ int run_decode(const SlCommandOptions& c) {
 
   if (c.filter) {
 #if defined(SCANCLEAN_HAVE_FILTER)
-    FilterOptions fo;
-    if (c.filter_h > 0) {
-      fo.scale = ScaleMode::kFixed;
-      fo.h = c.filter_h;
-    }
-    fo.threads = c.threads;
-    std::unique_ptr<Progress> bar;
-    std::string phase;
-    std::uint64_t done = 0;
-    fo.progress = [&](const std::string& p, double fraction) {
-      if (p != phase) {
-        bar.reset();
-        bar = std::make_unique<Progress>("filter: " + p, 1000);
-        phase = p;
-        done = 0;
-      }
-      const auto target = static_cast<std::uint64_t>(fraction * 1000.0);
-      if (target > done) {
-        bar->advance(target - done);
-        done = target;
-      }
-    };
+    FilterCliValues fv;  // the shared mapping (filter_options_cli.h)
+    fv.h = c.filter_h;
+    fv.threads = c.threads;
+    FilterOptions fo = to_filter_options(fv);
+    FilterProgress progress(fo);
     validate(fo);
     FilterResult fr = robust_filter(cloud, fo);
-    bar.reset();
+    progress.finish();
     sum.add("filter", with_thousands(fr.stats.points_out) + " points out, h " +
                           std::to_string(fr.stats.h * 1e3).substr(0, 6) + " mm, " +
                           std::to_string(fr.stats.seconds_total).substr(0, 5) + " s");
