@@ -190,6 +190,8 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   std::fprintf(stderr, "scanclean %s: opening the source\n", command.c_str());
   source.open();
   const SourceInfo info = source.info();
+  for (const auto& w : info.warnings)
+    std::fprintf(stderr, "scanclean %s: warning: %s\n", command.c_str(), w.c_str());
   std::uint64_t expected = 0;
   if (info.frame_count) expected = *info.frame_count;
   if (options.last_frame > 0 && (expected == 0 || options.last_frame < expected))
@@ -208,7 +210,7 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   auto write_window = [&](const WindowOutput& w, bool numbered) {
     const std::filesystem::path p = numbered ? window_path(output, w.window) : output;
     const std::size_t in = options.raw ? w.cloud.size() : w.filter.points_in;
-    if (!options.raw && in >= 2 && w.cloud.size() <= 1) {
+    if (!options.raw && ((in >= 1 && w.cloud.empty()) || (in >= 2 && w.cloud.size() == 1))) {
       collapsed.push_back(p.string() + ": " + std::to_string(w.cloud.size()) + " point(s) from " +
                           with_thousands(in) + " (h " + std::to_string(w.filter.h * 1e3) +
                           " mm, merge eps " + std::to_string(w.filter.merge_eps * 1e3) + " mm)");
@@ -243,15 +245,20 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   Summary sum("scanclean " + command);
   sum.add("source",
           info.uri + " (" + info.kind + (info.name.empty() ? "" : ", " + info.name) + ")");
+  if (!info.warnings.empty()) sum.add_count("source warnings", info.warnings.size());
   sum.add("stopped", to_string(st.stop) + (st.message.empty() ? "" : ": " + st.message));
   sum.add_count("frames read", st.frames_read);
   sum.add_count("frames used", st.frames_used);
   sum.add("dropped frames (index gaps)",
-          with_thousands(st.dropped_frames) + " in " + with_thousands(st.gap_events) + " gaps");
+          with_thousands(st.dropped_frames) + " in " + with_thousands(st.gap_events) + " gaps" +
+              (st.trailing_dropped_frames > 0
+                   ? " (" + with_thousands(st.trailing_dropped_frames) + " at the end)"
+                   : std::string()));
   sum.add_count("timeouts", st.timeouts);
   if (st.disconnects > 0)
     sum.add("disconnects", with_thousands(st.disconnects) + " (" + with_thousands(st.reconnects) +
-                               " reconnected)");
+                               " reconnected, " + with_thousands(st.reconnect_lost_frames) +
+                               " frames lost while reconnecting)");
   if (st.frames_used > 0)
     sum.add("points per frame", with_thousands(st.min_points_per_frame) + " min, " +
                                     with_thousands(st.points_in / st.frames_used) + " mean, " +
@@ -285,6 +292,13 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     std::fprintf(stderr, "scanclean %s: error: the source failed: %s\n", command.c_str(),
                  st.message.c_str());
     return static_cast<int>(ExitCode::kBadInput);
+  }
+  if (st.reconnect_budget_exhausted) {
+    std::fprintf(stderr,
+                 "scanclean %s: error: the source kept disconnecting: %s (what was captured "
+                 "before is written)\n",
+                 command.c_str(), st.message.c_str());
+    return static_cast<int>(ExitCode::kUnavailable);
   }
   if (st.frames_used == 0) {
     std::fprintf(stderr, "scanclean %s: error: no frame was read (%s)\n", command.c_str(),

@@ -40,6 +40,7 @@ void check_clean_outputs(const std::string& command, const PipelineOptions& opti
 //! Runs the job on `source` (not yet opened) and writes the outputs (the clean cloud and the
 //! outliers of a window are committed together or not at all). Returns the exit code: 0; 130
 //! after SIGINT (what was captured is written); 3 on a source error or when no frame was read;
+//! 5 when the source kept disconnecting until the --reconnect budget was used up;
 //! 6 when a window's result is empty or collapsed to one point although its input was not
 //! (that window is not written).
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,

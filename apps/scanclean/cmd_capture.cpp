@@ -78,8 +78,10 @@ const CommandRegistrar kRegistrar{{
       (void)f;
       (void)s;
       cmd.add_option("--reconnect", c->reconnect,
-                     "After a disconnect, try to reopen the device up to this many times "
-                     "(default 0: stop cleanly, keeping what was captured)")
+                     "After a disconnect, reopen the device; at most this many attempts over the "
+                     "whole capture (a device that keeps disconnecting ends with exit 5; default "
+                     "0: stop cleanly at the first disconnect, keeping what was captured)")
+          ->check(integer_in(0, 1000000))
           ->default_val(0);
       cmd.add_flag("--depth-100um", c->depth_100um, "Live sensors: 0.1 mm depth units");
       cmd.footer(

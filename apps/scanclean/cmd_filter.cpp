@@ -91,7 +91,9 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   const FilterResult r = robust_filter(cloud, o);
   progress.finish();
 
-  const bool collapsed = r.cloud.size() <= 1 && r.stats.points_in >= 2;
+  // Empty (from any input) or one point from more: nothing usable; exit 6, nothing written.
+  const bool collapsed = (r.cloud.empty() && r.stats.points_in >= 1) ||
+                         (r.cloud.size() == 1 && r.stats.points_in >= 2);
   if (!collapsed) {
     AtomicCommitGroup both;  // the cleaned cloud and the outliers, or neither
     write_point_cloud(c.output, r.cloud, w);

@@ -222,9 +222,11 @@ const CommandRegistrar kRegistrar{{
           ->required();
       pat->add_option("-o,--output", c->pattern_dir, "Output folder")->required();
       pat->add_option("--white-threshold", c->white_threshold,
-                      "Bit threshold stored in capture.json (gray levels, default 5)");
+                      "Bit threshold stored in capture.json (gray levels, default 5)")
+          ->check(integer_in(0, 255));
       pat->add_option("--black-threshold", c->black_threshold,
-                      "Shadow threshold stored in capture.json (gray levels, default 40)");
+                      "Shadow threshold stored in capture.json (gray levels, default 40)")
+          ->check(integer_in(0, 255));
 
       auto* dec = cmd.add_subcommand(
           "decode",
@@ -240,10 +242,12 @@ const CommandRegistrar kRegistrar{{
                       "quantization use about twice the depth step)");
       dec->add_option("--black-threshold", c->black_threshold,
                       "Shadow mask: white - black must exceed this (gray levels; default: "
-                      "capture.json's, else 40)");
+                      "capture.json's, else 40)")
+          ->check(integer_in(0, 255));
       dec->add_option("--white-threshold", c->white_threshold,
                       "Every bit needs |I - I_inverse| >= this (gray levels; default: "
-                      "capture.json's, else 5)");
+                      "capture.json's, else 5)")
+          ->check(integer_in(0, 255));
       dec->add_option("--calib", c->calib, "Calibration file (overrides the one found beside)");
       dec->add_option("--decoder", c->decoder,
                       "'fast' (vectorised, default) or 'opencv' (GrayCodePattern::getProjPixel "

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "json_input.h"
 #include "png16.h"
 #include "scanclean/core/errors.h"
 
@@ -240,12 +241,7 @@ Sidecar read_sidecar(const fs::path& file) {
   using nlohmann::json;
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = detail::read_file_bytes(file, 1 << 20);
-  json j;
-  try {
-    j = json::parse(bytes.begin(), bytes.end());
-  } catch (const json::parse_error& e) {
-    throw InputError(name, byte_place(e.byte), std::string("not valid JSON: ") + e.what());
-  }
+  const json j = detail::parse_json_input(std::string(bytes.begin(), bytes.end()), name);
   if (!j.is_object()) throw InputError(name, "", "expected a JSON object");
   auto num = [&](const char* key) {
     if (!j.contains(key)) throw InputError(name, std::string("field ") + key, "missing");
