@@ -87,6 +87,10 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
     ++files;
   }
 
+  if (cloud.empty())
+    throw InputError(
+        "filter: the inputs hold no points (every file is empty or every point was "
+        "invalid); nothing to filter");
   FilterProgress progress(o);
   const FilterResult r = robust_filter(cloud, o);
   progress.finish();

@@ -248,6 +248,21 @@ TEST(ScancleanChecksTest, InfoOnManyCoincidentPointsFinishes) {
   EXPECT_TRUE(has(r.out, "1.000 mm")) << r.out;
 }
 
+TEST(ScancleanChecksTest, MalformedCorpusFilesExitThreeNamingTheFile) {
+  const auto dir = test::make_temp_dir("checks");
+  const fs::path corpus = fs::path(SCANCLEAN_SOURCE_DIR) / "tests" / "data" / "malformed";
+  for (const char* name : {"ply_count_huge.ply", "pcd_compressed_size_lie.pcd",
+                           "xyz_six_ambiguous.xyz", "xyz_empty.xyz", "ply_list_count_lies.ply"}) {
+    const Outcome info = run({"info", (corpus / name).string()}, dir);
+    EXPECT_EQ(info.exit_code, 3) << name << ": " << info.err;
+    EXPECT_TRUE(has(info.err, name)) << info.err;
+    const Outcome filter =
+        run({"filter", (corpus / name).string(), "-o", (dir / "o.ply").string()}, dir);
+    EXPECT_EQ(filter.exit_code, 3) << name << ": " << filter.err;
+    EXPECT_FALSE(fs::exists(dir / "o.ply"));
+  }
+}
+
 #if defined(SCANCLEAN_HAVE_OPENNI2)
 //! A 3-frame recording folder made from the bundled .oni, for the cases below.
 fs::path small_recording(const fs::path& dir) {
