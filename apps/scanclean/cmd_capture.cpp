@@ -88,8 +88,10 @@ const CommandRegistrar kRegistrar{{
           "Stops at the end of a finite source, after --frames/--seconds, on a disconnect, or on "
           "Ctrl-C (exit 130; what was captured is filtered and written). With no sensor: "
           "\"no depth sensor found; run scanclean devices\", exit 5.\n"
+          "A device that keeps disconnecting until the --reconnect budget is used up: exit 5.\n"
           "Exit codes: 0 ok, 1 internal error, 2 bad command line or option, 3 bad input data,\n"
-          "4 file I/O failure, 5 device/driver/feature unavailable, 130 interrupted.");
+          "4 file I/O failure, 5 device/driver/feature unavailable, 6 empty or collapsed result\n"
+          "(nothing written), 130 interrupted.");
       auto apply = add_clean_options(cmd);
       auto intrinsics = add_intrinsics_options(cmd);
       return [c, apply, intrinsics] { return run_capture(*c, apply, intrinsics); };

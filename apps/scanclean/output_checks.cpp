@@ -71,7 +71,7 @@ void check_output_files(const std::string& command, const std::vector<PathArg>& 
                     folder.string() + "\": " + std::strerror(errno));
     for (const auto& in : inputs)
       if (!in.path.empty() && same_file(out.path, in.path))
-        throw OptionError(command + ": " + named(out) + " is the input " + named(in) +
+        throw OptionError(command + ": " + named(out) + " is the same file as the " + named(in) +
                           "; refusing to overwrite it (choose another output)");
     for (std::size_t j = 0; j < i; ++j)
       if (!outputs[j].path.empty() && same_file(out.path, outputs[j].path))
