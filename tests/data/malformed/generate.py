@@ -117,6 +117,17 @@ files["depth_png_8bit.png"] = png(4, 3, 8, 0, b"".join(b"\0" + b"\x10" * 4 for _
 files["depth_png_size_lie.png"] = png(60000, 60000, 16, 0, b"\0" * 10)
 files["depth_pgm_truncated.pgm"] = b"P5\n4 3\n65535\n" + b"\0" * 5
 files["depth_tiff_garbage.tif"] = b"II*\0" + struct.pack("<I", 4000000000) + b"\0" * 16
+def tiff16_header(w, h, nbytes):
+    entries = [(256, 4, 1, w), (257, 4, 1, h), (258, 3, 1, 16), (259, 3, 1, 8), (262, 3, 1, 1),
+               (273, 4, 1, 8), (277, 3, 1, 1), (278, 4, 1, h), (279, 4, 1, nbytes)]
+    data = b"\x78\x9c" + b"\0" * (nbytes - 2)
+    ifd = struct.pack("<H", len(entries))
+    for tag, typ, cnt, val in entries:
+        v = struct.pack("<H", val) + b"\0\0" if typ == 3 else struct.pack("<I", val)
+        ifd += struct.pack("<HHI", tag, typ, cnt) + v
+    return b"II*\0" + struct.pack("<I", 8 + len(data)) + data + ifd + struct.pack("<I", 0)
+
+files["depth_tiff_size_lie.tif"] = tiff16_header(8000, 8000, 16)
 files["depth_png_not_png.png"] = b"this is not a png at all\n" * 3
 
 files["frames_bad_header.csv"] = b"idx,ts\n0,0\n"
