@@ -11,6 +11,7 @@
 #include <memory>
 #include <string>
 
+#include "scanclean/clean_job.h"
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/drivers/make_range_source.h"
@@ -18,11 +19,6 @@
 #include "scanclean/replay/recording_source.h"
 
 namespace scanclean::app {
-
-// Defined in cmd_replay.cpp.
-std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd);
-int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
-                  const std::filesystem::path& output, const std::filesystem::path& outliers);
 
 namespace {
 
@@ -37,8 +33,8 @@ struct CaptureCommandOptions {
   bool depth_100um = false;
 };
 
-int run_capture(const CaptureCommandOptions& c,
-                const std::function<void(PipelineOptions&)>& apply) {
+int run_capture(const CaptureCommandOptions& c, const std::function<void(PipelineOptions&)>& apply,
+                const std::function<void(const std::string&, SourceOptions&)>& intrinsics) {
   PipelineOptions o;
   apply(o);
   o.last_frame = c.frames;
@@ -46,6 +42,8 @@ int run_capture(const CaptureCommandOptions& c,
   o.reconnect_attempts = c.reconnect;
   SourceOptions so;
   so.depth_100um = c.depth_100um;
+  intrinsics(c.source, so);
+  check_clean_outputs("capture", o, c.source, c.output, c.outliers);
   std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
   if (!c.record.empty()) source = make_recording_source(std::move(source), c.record);
   const int rc = run_clean_job("capture", *source, o, c.output, c.outliers);
@@ -80,18 +78,23 @@ const CommandRegistrar kRegistrar{{
       (void)f;
       (void)s;
       cmd.add_option("--reconnect", c->reconnect,
-                     "After a disconnect, try to reopen the device up to this many times "
-                     "(default 0: stop cleanly, keeping what was captured)")
+                     "After a disconnect, reopen the device; at most this many attempts over the "
+                     "whole capture (a device that keeps disconnecting ends with exit 5; default "
+                     "0: stop cleanly at the first disconnect, keeping what was captured)")
+          ->check(integer_in(0, 1000000))
           ->default_val(0);
       cmd.add_flag("--depth-100um", c->depth_100um, "Live sensors: 0.1 mm depth units");
       cmd.footer(
           "Stops at the end of a finite source, after --frames/--seconds, on a disconnect, or on "
           "Ctrl-C (exit 130; what was captured is filtered and written). With no sensor: "
           "\"no depth sensor found; run scanclean devices\", exit 5.\n"
+          "A device that keeps disconnecting until the --reconnect budget is used up: exit 5.\n"
           "Exit codes: 0 ok, 1 internal error, 2 bad command line or option, 3 bad input data,\n"
-          "4 file I/O failure, 5 device/driver/feature unavailable, 130 interrupted.");
+          "4 file I/O failure, 5 device/driver/feature unavailable, 6 empty or collapsed result\n"
+          "(nothing written), 130 interrupted.");
       auto apply = add_clean_options(cmd);
-      return [c, apply] { return run_capture(*c, apply); };
+      auto intrinsics = add_intrinsics_options(cmd);
+      return [c, apply, intrinsics] { return run_capture(*c, apply, intrinsics); };
     },
 }};
 

@@ -11,6 +11,7 @@
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/output_checks.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -31,9 +32,10 @@ int run_convert(const ConvertOptions& o) {
     throw OptionError(o.conf.empty() ? "convert: expected IN and OUT files"
                                      : "convert --conf FILE.conf: expected only the OUT file");
   const std::string out = o.files.back();
-  if (point_cloud_format(out).empty())
-    throw OptionError("convert: output " + out +
-                      ": unsupported extension; expected .ply, .pcd, .xyz or .txt");
+  const std::string input = o.conf.empty() ? o.files.front() : o.conf;
+  const std::vector<PathArg> inputs{{o.conf.empty() ? "IN" : "--conf", input}};
+  check_input_files("convert", inputs);
+  check_output_files("convert", inputs, {{"OUT", out}});
   WriteOptions w;
   w.ply_encoding = o.ascii ? PlyEncoding::kAscii : PlyEncoding::kBinaryLittleEndian;
   w.pcd_encoding = o.pcd_encoding;

@@ -11,10 +11,12 @@
 #include <vector>
 
 #include "scanclean/command.h"
+#include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
-#include "scanclean/core/progress.h"
 #include "scanclean/filter/robust_filter.h"
+#include "scanclean/filter_options_cli.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/output_checks.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -25,28 +27,9 @@ struct FilterCommandOptions {
   std::string output;
   std::string conf;
   std::string outliers;
-  double h = 0;
-  int k = 0;
-  bool auto_scale = false;
-  int k_h = FilterOptions{}.k_h;
-  double noise_factor = FilterOptions{}.noise_factor;
-  double scale_gamma = FilterOptions{}.scale_gamma;
-  int kernel_stride = FilterOptions{}.kernel_stride;
-  double likelihood_ratio = FilterOptions{}.likelihood_ratio;
-  double displacement_sigma = FilterOptions{}.displacement_sigma;
-  double outlier_sigma = FilterOptions{}.outlier_sigma;
-  std::string update = "normal";
-  double merge_eps = -1;
-  double tau = FilterOptions{}.tau;
-  int passes = 1;
-  int threads = 0;
-  int k_min = 8;
-  int max_iterations = 20;
-  long long small_components = -1;  // -1 off, 0 automatic size, > 0 size
-  bool no_sensor_normals = false;
-  bool no_confidences = false;
   bool ascii = false;
   bool skip_missing = false;
+  std::string xyz_columns;
 };
 
 void print_warnings(const std::string& file, const ReadReport& report) {
@@ -56,14 +39,40 @@ void print_warnings(const std::string& file, const ReadReport& report) {
                  report.dropped_invalid);
 }
 
-int run_filter(const FilterCommandOptions& c) {
+int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
+  // Without -o, the last positional argument is the output (filter IN... OUT).
+  if (c.output.empty()) {
+    if (c.inputs.size() >= 2 || (c.inputs.size() == 1 && !c.conf.empty())) {
+      c.output = c.inputs.back();
+      c.inputs.pop_back();
+    } else {
+      throw OptionError(
+          "filter: no output given: use -o/--output OUT (or put OUT last: filter IN... OUT)");
+    }
+  }
   if (c.inputs.empty() && c.conf.empty())
     throw OptionError("filter: give at least one input file or --conf FILE");
+  // Every check before the first byte of input is read.
+  std::vector<PathArg> inputs;
+  for (const auto& in : c.inputs) inputs.push_back({"input", in});
+  if (!c.conf.empty()) inputs.push_back({"--conf", c.conf});
+  check_input_files("filter", inputs);
+  check_output_files("filter", inputs, {{"-o", c.output}, {"--outliers", c.outliers}});
+  FilterOptions o = to_filter_options(values);
+  validate(o);
+  WriteOptions w;
+  if (c.ascii) {
+    w.ply_encoding = PlyEncoding::kAscii;
+    w.pcd_encoding = "ascii";
+  }
+  XyzOptions xyz;
+  if (!c.xyz_columns.empty()) xyz.columns = parse_xyz_columns(c.xyz_columns);
+
   PointCloud cloud;
   std::size_t files = 0;
   for (const auto& in : c.inputs) {
     ReadReport report;
-    PointCloud part = read_point_cloud(in, &report);
+    PointCloud part = read_point_cloud(in, &report, xyz);
     print_warnings(in, report);
     append(cloud, part);
     ++files;
@@ -78,64 +87,23 @@ int run_filter(const FilterCommandOptions& c) {
     ++files;
   }
 
-  FilterOptions o;
-  if (c.h > 0) {
-    o.scale = ScaleMode::kFixed;
-    o.h = c.h;
-  } else if (c.k > 0) {
-    o.scale = ScaleMode::kAdaptive;
-    o.k_adaptive = c.k;
-  } else {
-    o.scale = ScaleMode::kAuto;
-  }
-  o.k_h = c.k_h;
-  o.noise_factor = c.noise_factor;
-  o.scale_gamma = c.scale_gamma;
-  o.kernel_stride = c.kernel_stride;
-  o.likelihood_ratio = c.likelihood_ratio;
-  o.displacement_sigma = c.displacement_sigma;
-  o.outlier_sigma = c.outlier_sigma;
-  o.k_min = c.k_min;
-  o.max_iterations = c.max_iterations;
-  o.update = c.update == "vector" ? UpdateMode::kVector : UpdateMode::kNormal;
-  o.merge_eps = c.merge_eps;
-  o.tau = c.tau;
-  o.passes = c.passes;
-  o.threads = c.threads;
-  o.use_sensor_normals = !c.no_sensor_normals;
-  o.use_confidences = !c.no_confidences;
-  if (c.small_components >= 0) {
-    o.remove_small_components = true;
-    o.min_component_size = static_cast<std::size_t>(c.small_components);
-  }
-  std::unique_ptr<Progress> bar;
-  std::string phase;
-  std::uint64_t done = 0;
-  o.progress = [&](const std::string& p, double fraction) {
-    if (p != phase) {
-      bar.reset();  // finishes the previous bar
-      bar = std::make_unique<Progress>("filter: " + p, 1000);
-      phase = p;
-      done = 0;
-    }
-    const auto target = static_cast<std::uint64_t>(fraction * 1000.0);
-    if (target > done) {
-      bar->advance(target - done);
-      done = target;
-    }
-  };
-  validate(o);  // before the (possibly long) run, so a bad option fails fast
-
+  if (cloud.empty())
+    throw InputError(
+        "filter: the inputs hold no points (every file is empty or every point was "
+        "invalid); nothing to filter");
+  FilterProgress progress(o);
   const FilterResult r = robust_filter(cloud, o);
-  bar.reset();
+  progress.finish();
 
-  WriteOptions w;
-  if (c.ascii) {
-    w.ply_encoding = PlyEncoding::kAscii;
-    w.pcd_encoding = "ascii";
+  // Empty (from any input) or one point from more: nothing usable; exit 6, nothing written.
+  const bool collapsed = (r.cloud.empty() && r.stats.points_in >= 1) ||
+                         (r.cloud.size() == 1 && r.stats.points_in >= 2);
+  if (!collapsed) {
+    AtomicCommitGroup both;  // the cleaned cloud and the outliers, or neither
+    write_point_cloud(c.output, r.cloud, w);
+    if (!c.outliers.empty()) write_point_cloud(c.outliers, r.outliers, w);
+    both.commit();
   }
-  write_point_cloud(c.output, r.cloud, w);
-  if (!c.outliers.empty()) write_point_cloud(c.outliers, r.outliers, w);
 
   const FilterStats& s = r.stats;
   Summary sum("scanclean filter");
@@ -149,12 +117,9 @@ int run_filter(const FilterCommandOptions& c) {
               with_thousands(s.low_density) + ", low likelihood " +
               with_thousands(s.low_likelihood) + ", displaced " + with_thousands(s.displaced) +
               ", small components " + with_thousands(s.small_components) + ")");
-  if (!c.outliers.empty()) sum.add("outliers file", c.outliers);
-  sum.add("output file", c.output);
-  const char* mode = o.scale == ScaleMode::kFixed  ? "fixed"
-                     : o.scale == ScaleMode::kAuto ? "auto"
-                                                   : "adaptive";
-  sum.add("scale", std::string(mode));
+  if (!c.outliers.empty()) sum.add("outliers file", collapsed ? "not written" : c.outliers);
+  sum.add("output file", collapsed ? "not written (collapsed result)" : c.output);
+  sum.add("scale", std::string(scale_mode_name(o.scale)));
   sum.add("h", s.h * 1000.0, 3, "mm");
   if (o.scale == ScaleMode::kAdaptive) {
     char range[96];
@@ -187,6 +152,14 @@ int run_filter(const FilterCommandOptions& c) {
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
   sum.print();
+  if (collapsed) {
+    std::fprintf(stderr,
+                 "scanclean filter: error: the result has %zu point(s) from %zu input points, "
+                 "nothing usable (h %.6g m, merge eps %.6g m); nothing was written; check --h, "
+                 "--k and --merge-eps\n",
+                 r.cloud.size(), r.stats.points_in, r.stats.h, r.stats.merge_eps);
+    return static_cast<int>(ExitCode::kEmptyResult);
+  }
   return 0;
 }
 
@@ -197,97 +170,25 @@ const CommandRegistrar kRegistrar{{
     [](CLI::App& cmd) {
       auto c = std::make_shared<FilterCommandOptions>();
       cmd.add_option("inputs", c->inputs,
-                     "Input point clouds (.ply .pcd .xyz .txt, metres); several are merged");
-      cmd.add_option("-o,--output", c->output, "Output point cloud (format by extension)")
-          ->required();
+                     "Input point clouds (.ply .pcd .xyz .txt, metres); several are merged. "
+                     "Without -o, the last one is the output");
+      cmd.add_option("-o,--output", c->output, "Output point cloud (format by extension)");
       cmd.add_option("--conf", c->conf,
                      "Stanford .conf scan session: every scan transformed and merged (added to "
                      "the inputs)");
       cmd.add_flag("--skip-missing", c->skip_missing,
                    "With --conf: merge the scans that exist, warn about missing ones (default: "
                    "a missing scan is an error)");
-      auto* h = cmd.add_option("--h", c->h,
-                               "Fixed kernel size h in metres (the paper uses 1-10x the mean "
-                               "point spacing)")
-                    ->check(positive_number());
-      auto* k = cmd.add_option("--k", c->k,
-                               "Adaptive kernels: h_i = distance to the k-th nearest neighbour "
-                               "(the paper uses 250 on raw overlapping scans)")
-                    ->check(CLI::Range(2, 1000));
-      auto* a = cmd.add_flag("--auto", c->auto_scale,
-                             "Automatic h (default): median distance to the K_h-th neighbour, "
-                             "raised to --noise-factor x the noise sigma estimated at that scale, "
-                             "then adjusted by the scale test (--scale-gamma)");
-      h->excludes(k)->excludes(a);
-      k->excludes(a);
-      cmd.add_option("--k-h", c->k_h, "K_h, the neighbour rank of the automatic h")
-          ->capture_default_str();
-      cmd.add_option("--noise-factor", c->noise_factor,
-                     "Automatic h: at least this many times the noise sigma (estimated at the "
-                     "scale h itself; the spec's literal rule is 3 at h0)")
-          ->capture_default_str();
-      cmd.add_option("--scale-gamma", c->scale_gamma,
-                     "Automatic h, last step: the median, over sampled points, of the largest "
-                     "ball (0.5 to 1.41 x the noise rule's h) whose plane agrees with every "
-                     "smaller ball's within this many standard errors; larger h on smooth "
-                     "surfaces, smaller on curved or thin parts (0 = off)")
-          ->check(CLI::Range(0.0, 20.0))
-          ->capture_default_str();
-      cmd.add_option("--kernel-stride", c->kernel_stride,
-                     "Kernels at every N-th point (weights x N); 1 = at every point, as the "
-                     "paper; 0 = automatic: 1 unless h was raised above h0 (noise, scale test), "
-                     "then (h/h0)^2")
-          ->capture_default_str();
-      cmd.add_option("--update", c->update,
-                     "Projection step: 'normal' moves along the mean normal (default), "
-                     "'vector' is the paper's literal x <- x - m")
-          ->check(CLI::IsMember({"normal", "vector"}))
-          ->default_val("normal");
-      cmd.add_option("--merge-eps", c->merge_eps,
-                     "Merge converged points closer than this (metres); 0 = keep every point; "
-                     "default 0.25 x mean spacing");
-      cmd.add_option("--tau", c->tau,
-                     "Drop points whose density is below tau x the median density (0 = off)")
-          ->capture_default_str();
-      cmd.add_option("--outlier-sigma", c->outlier_sigma,
-                     "Before projecting, drop points farther than this many standard deviations "
-                     "from every kernel around them, each kernel refitted without the point and "
-                     "its own centre (catches outliers closer than h; 0 = off)")
-          ->capture_default_str();
-      cmd.add_option("--likelihood-ratio", c->likelihood_ratio,
-                     "Drop points whose likelihood is below this fraction of the lower "
-                     "quartile of the likelihoods of the points within h (points stopped off "
-                     "the surface; 0 = off)")
-          ->capture_default_str();
-      cmd.add_option("--displacement-sigma", c->displacement_sigma,
-                     "After projecting, drop points whose move along the normal differs from "
-                     "the median move of the points within h by more than this many robust "
-                     "standard deviations (outliers pulled onto the surface; 0 = off)")
-          ->capture_default_str();
-      cmd.add_option("--small-components", c->small_components,
-                     "Also drop connected pieces (link radius h) with fewer input points than "
-                     "this; 0 = max(k_min, 0.1 % of the points)");
       cmd.add_option("--outliers", c->outliers,
                      "Write the removed input points here (attribute flags: 1 unsupported, 2 "
                      "outlier)");
-      cmd.add_option("--passes", c->passes,
-                     "2 = rebuild the kernels from the first result and project again (heavy "
-                     "noise)")
-          ->default_val(1);
-      cmd.add_option("--k-min", c->k_min, "Points with fewer neighbours within h get no kernel")
-          ->default_val(8);
-      cmd.add_option("--max-iterations", c->max_iterations, "Iteration cap per point")
-          ->default_val(20);
-      cmd.add_flag("--no-sensor-normals", c->no_sensor_normals,
-                   "Ignore input normals (default: they replace the PCA normals and keep the "
-                   "two sides of thin parts apart)");
-      cmd.add_flag("--no-confidences", c->no_confidences,
-                   "Ignore input confidences (default: they weight the kernels)");
-      cmd.add_option("--threads", c->threads,
-                     "Worker threads, 0 = all cores (the result is identical for any value)")
-          ->default_val(0);
+      cmd.add_option("--xyz-columns", c->xyz_columns,
+                     "Columns of .xyz/.txt inputs, comma-separated, e.g. x,y,z,r,g,b or "
+                     "x,y,z,nx,ny,nz or x,y,z,i (names: x y z nx ny nz r g b i, '-' = skip); "
+                     "default: guessed from the first line (see scanclean info)");
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
-      return [c] { return run_filter(*c); };
+      auto values = add_filter_options(cmd);
+      return [c, values] { return run_filter(*c, *values); };
     },
 }};
 

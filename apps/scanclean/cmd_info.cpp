@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <memory>
 #include <nanoflann.hpp>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -28,23 +29,42 @@ struct CloudAdaptor {
   }
 };
 
-//! Median nearest-neighbour distance over up to max_samples evenly spaced points (metres);
-//! -1 when the cloud has fewer than 2 points.
-double median_spacing(const PointCloud& cloud, std::size_t max_samples) {
-  if (cloud.size() < 2) return -1;
+//! Median nearest-neighbour distance between distinct positions, over up to max_samples evenly
+//! spaced ones (metres); -1 when there are fewer than 2 distinct positions. Coincident points
+//! are merged first (a k-d tree over many equal points degenerates); `duplicates` receives how
+//! many points repeat an earlier position.
+double median_spacing(const PointCloud& cloud, std::size_t max_samples, std::size_t* duplicates) {
+  std::vector<Eigen::Vector3d> distinct(cloud.positions);
+  auto less = [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    return std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3);
+  };
+  std::sort(distinct.begin(), distinct.end(), less);
+  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+  *duplicates = cloud.size() - distinct.size();
+  if (distinct.size() < 2) return -1;
+  // Back to an even spread over the cloud for the samples (sorted order would sample a slab).
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(distinct.size());
+  {
+    std::vector<std::size_t> order(distinct.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::mt19937_64 rng(12345);
+    std::shuffle(order.begin(), order.end(), rng);
+    for (auto i : order) points.push_back(distinct[i]);
+  }
   using Tree =
       nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, CloudAdaptor>,
                                           CloudAdaptor, 3, std::uint32_t>;
-  CloudAdaptor adaptor{cloud.positions};
+  CloudAdaptor adaptor{points};
   Tree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-  const std::size_t samples = std::min(max_samples, cloud.size());
+  const std::size_t samples = std::min(max_samples, points.size());
   std::vector<double> d;
   d.reserve(samples);
   for (std::size_t s = 0; s < samples; ++s) {
-    const std::size_t i = s * cloud.size() / samples;
+    const std::size_t i = s * points.size() / samples;
     std::uint32_t idx[2];
     double dist2[2];
-    const auto found = tree.knnSearch(cloud.positions[i].data(), 2, idx, dist2);
+    const auto found = tree.knnSearch(points[i].data(), 2, idx, dist2);
     if (found == 2) d.push_back(std::sqrt(dist2[1]));
   }
   if (d.empty()) return -1;
@@ -58,14 +78,15 @@ std::string fmt(double v, int precision) {
   return buf;
 }
 
-void describe(const std::string& path, bool skip_missing, std::size_t max_warnings) {
+void describe(const std::string& path, bool skip_missing, std::size_t max_warnings,
+              const XyzOptions& xyz) {
   ReadReport r;
   PointCloud c;
   const bool conf = std::filesystem::path(path).extension() == ".conf";
   if (conf)
     c = read_and_merge_conf(path, &r, ConfOptions{skip_missing});
   else
-    c = read_point_cloud(path, &r);
+    c = read_point_cloud(path, &r, xyz);
   Summary s(path);
   s.add("format", r.format + (r.encoding.empty() ? "" : " (" + r.encoding + ")"));
   s.add("points", with_thousands(c.size()) + " (declared " + with_thousands(r.declared_points) +
@@ -97,11 +118,17 @@ void describe(const std::string& path, bool skip_missing, std::size_t max_warnin
     s.add("bounding box", "x " + range(0) + ", y " + range(1) + ", z " + range(2) + " m");
     const Eigen::Vector3d size = b.sizes();
     s.add("size", fmt(size.x(), 4) + " x " + fmt(size.y(), 4) + " x " + fmt(size.z(), 4) + " m");
-    const double spacing = median_spacing(c, 10000);
+    std::size_t duplicates = 0;
+    const double spacing = median_spacing(c, 10000, &duplicates);
     if (spacing >= 0)
-      s.add("mean spacing", fmt(spacing * 1e3, 3) + " mm (median nearest-neighbour distance over " +
-                                with_thousands(std::min<std::size_t>(10000, c.size())) +
-                                " points)");
+      s.add("mean spacing",
+            fmt(spacing * 1e3, 3) + " mm (median nearest-neighbour distance over " +
+                with_thousands(std::min<std::size_t>(10000, c.size() - duplicates)) +
+                " distinct points)");
+    else if (c.size() >= 2)
+      s.add("mean spacing", "none (every point at the same position)");
+    if (duplicates > 0)
+      s.add("coincident points", with_thousands(duplicates) + " repeat an earlier position");
   }
   s.add_count("warnings", r.warnings.size());
   s.print();
@@ -115,15 +142,18 @@ void describe(const std::string& path, bool skip_missing, std::size_t max_warnin
 
 struct InfoOptions {
   std::vector<std::string> files;
+  std::string xyz_columns;
   bool skip_missing = false;
   bool all_warnings = false;
 };
 
 int run_info(const InfoOptions& o) {
   int worst = 0;
+  XyzOptions xyz;
+  if (!o.xyz_columns.empty()) xyz.columns = parse_xyz_columns(o.xyz_columns);
   for (const auto& f : o.files) {
     try {
-      describe(f, o.skip_missing, o.all_warnings ? static_cast<std::size_t>(-1) : 10);
+      describe(f, o.skip_missing, o.all_warnings ? static_cast<std::size_t>(-1) : 10, xyz);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "scanclean: error: %s\n", e.what());
       worst = std::max(worst, static_cast<int>(exit_code_for(e)));
@@ -145,6 +175,9 @@ const CommandRegistrar kRegistrar{{
                    "For .conf files: describe the scans that exist and warn about missing ones "
                    "(default: a missing scan is an error)");
       cmd.add_flag("--all-warnings", o->all_warnings, "Print every reader warning (default: 10)");
+      cmd.add_option("--xyz-columns", o->xyz_columns,
+                     "Columns of .xyz/.txt files, e.g. x,y,z,r,g,b (default: guessed; the "
+                     "'format' line says how the columns were found)");
       cmd.footer(
           "Prints, per file: format and encoding, point count (declared, kept, and invalid NaN/inf "
           "points dropped), fields as stored, organized size (rows x cols) for range images and "

@@ -6,7 +6,6 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -16,6 +15,8 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/core/progress.h"
 #include "scanclean/drivers/make_range_source.h"
+#include "scanclean/interrupt.h"
+#include "scanclean/replay/recording_format.h"
 #include "scanclean/replay/recording_source.h"
 #include "scanclean/summary.h"
 #ifdef SCANCLEAN_HAVE_OPENNI2
@@ -23,25 +24,6 @@
 #endif
 
 namespace scanclean::app {
-
-#if defined(SCANCLEAN_HAVE_IO) && defined(SCANCLEAN_HAVE_FILTER) && defined(SCANCLEAN_HAVE_PIPELINE)
-// Defined in cmd_replay.cpp.
-void install_sigint_handler();
-bool interrupted();
-#else
-namespace {
-volatile std::sig_atomic_t g_record_interrupted = 0;
-extern "C" void on_record_sigint(int) {
-  g_record_interrupted = 1;
-}
-void install_sigint_handler() {
-  std::signal(SIGINT, on_record_sigint);
-}
-bool interrupted() {
-  return g_record_interrupted != 0;
-}
-}  // namespace
-#endif
 
 namespace {
 
@@ -53,6 +35,18 @@ struct RecordCommandOptions {
   std::uint64_t frames = 0;
   double seconds = 0;
 };
+
+// vsensor://<recording folder>[?...] without loop=1: the virtual sensor ends with the folder.
+bool finite_vsensor(const std::string& uri) {
+  const std::string scheme = "vsensor://";
+  if (uri.rfind(scheme, 0) != 0) return false;
+  const std::string rest = uri.substr(scheme.size());
+  const auto q = rest.find('?');
+  const std::string folder = rest.substr(0, q);
+  const std::string query = q == std::string::npos ? "" : "&" + rest.substr(q + 1) + "&";
+  if (query.find("&loop=1&") != std::string::npos) return false;
+  return is_recording_folder(folder);
+}
 
 bool ends_with_oni(const std::string& s) {
   if (s.size() < 4) return false;
@@ -91,6 +85,8 @@ int record_to_folder(const RecordCommandOptions& c) {
   const auto start = Clock::now();
   source->open();
   const SourceInfo info = source->info();
+  for (const auto& w : info.warnings)
+    std::fprintf(stderr, "scanclean record: warning: %s\n", w.c_str());
   std::unique_ptr<Progress> bar;
   if (c.frames > 0) bar = std::make_unique<Progress>("record: frames", c.frames);
   std::uint64_t written = 0, timeouts = 0, gaps = 0, last_index = 0;
@@ -160,8 +156,11 @@ const CommandRegistrar kRegistrar{{
                      "recording stays readable up to its last complete frame)")
           ->required();
       return [c]() -> int {
-        if (c->frames == 0 && c->seconds <= 0 && c->source.find("://") != std::string::npos)
-          throw OptionError("record: give --frames N or --seconds S for a live source");
+        if (c->frames == 0 && c->seconds <= 0 && c->source.find("://") != std::string::npos &&
+            !finite_vsensor(c->source))
+          throw OptionError(
+              "record: give --frames N or --seconds S for a live source (a vsensor:// recording "
+              "folder without loop=1 ends by itself)");
         return ends_with_oni(c->output) ? record_to_oni(*c) : record_to_folder(*c);
       };
     },

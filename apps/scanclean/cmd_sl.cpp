@@ -22,6 +22,7 @@
 #endif
 #if defined(SCANCLEAN_HAVE_FILTER)
 #include "scanclean/filter/robust_filter.h"
+#include "scanclean/filter_options_cli.h"
 #endif
 #if defined(SCANCLEAN_HAVE_PIPELINE)
 #include "scanclean/pipeline/frame_to_points.h"
@@ -176,31 +177,14 @@ int run_decode(const SlCommandOptions& c) {
 
   if (c.filter) {
 #if defined(SCANCLEAN_HAVE_FILTER)
-    FilterOptions fo;
-    if (c.filter_h > 0) {
-      fo.scale = ScaleMode::kFixed;
-      fo.h = c.filter_h;
-    }
-    fo.threads = c.threads;
-    std::unique_ptr<Progress> bar;
-    std::string phase;
-    std::uint64_t done = 0;
-    fo.progress = [&](const std::string& p, double fraction) {
-      if (p != phase) {
-        bar.reset();
-        bar = std::make_unique<Progress>("filter: " + p, 1000);
-        phase = p;
-        done = 0;
-      }
-      const auto target = static_cast<std::uint64_t>(fraction * 1000.0);
-      if (target > done) {
-        bar->advance(target - done);
-        done = target;
-      }
-    };
+    FilterCliValues fv;  // the shared mapping (filter_options_cli.h)
+    fv.h = c.filter_h;
+    fv.threads = c.threads;
+    FilterOptions fo = to_filter_options(fv);
+    FilterProgress progress(fo);
     validate(fo);
     FilterResult fr = robust_filter(cloud, fo);
-    bar.reset();
+    progress.finish();
     sum.add("filter", with_thousands(fr.stats.points_out) + " points out, h " +
                           std::to_string(fr.stats.h * 1e3).substr(0, 6) + " mm, " +
                           std::to_string(fr.stats.seconds_total).substr(0, 5) + " s");
@@ -238,9 +222,11 @@ const CommandRegistrar kRegistrar{{
           ->required();
       pat->add_option("-o,--output", c->pattern_dir, "Output folder")->required();
       pat->add_option("--white-threshold", c->white_threshold,
-                      "Bit threshold stored in capture.json (gray levels, default 5)");
+                      "Bit threshold stored in capture.json (gray levels, default 5)")
+          ->check(integer_in(0, 255));
       pat->add_option("--black-threshold", c->black_threshold,
-                      "Shadow threshold stored in capture.json (gray levels, default 40)");
+                      "Shadow threshold stored in capture.json (gray levels, default 40)")
+          ->check(integer_in(0, 255));
 
       auto* dec = cmd.add_subcommand(
           "decode",
@@ -256,10 +242,12 @@ const CommandRegistrar kRegistrar{{
                       "quantization use about twice the depth step)");
       dec->add_option("--black-threshold", c->black_threshold,
                       "Shadow mask: white - black must exceed this (gray levels; default: "
-                      "capture.json's, else 40)");
+                      "capture.json's, else 40)")
+          ->check(integer_in(0, 255));
       dec->add_option("--white-threshold", c->white_threshold,
                       "Every bit needs |I - I_inverse| >= this (gray levels; default: "
-                      "capture.json's, else 5)");
+                      "capture.json's, else 5)")
+          ->check(integer_in(0, 255));
       dec->add_option("--calib", c->calib, "Calibration file (overrides the one found beside)");
       dec->add_option("--decoder", c->decoder,
                       "'fast' (vectorised, default) or 'opencv' (GrayCodePattern::getProjPixel "

@@ -31,6 +31,10 @@ std::vector<Command>& command_registry();
 //! PositiveNumber / NonNegativeNumber, whose message prints the double range in full.
 const CLI::Validator& positive_number();
 const CLI::Validator& non_negative_number();
+//! A number in [lo, hi] ((lo, hi] with lo_open): "expected a number in (0, 20], got 25".
+CLI::Validator number_in(double lo, double hi, bool lo_open = false);
+//! An integer in [lo, hi]: "expected an integer in [1, 2], got 3".
+CLI::Validator integer_in(long long lo, long long hi);
 
 struct CommandRegistrar {
   explicit CommandRegistrar(Command c) { command_registry().push_back(std::move(c)); }

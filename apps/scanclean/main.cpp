@@ -13,7 +13,8 @@ namespace {
 
 constexpr const char* kExitCodes =
     "Exit codes: 0 ok, 1 internal error, 2 bad command line or option, 3 bad input data,\n"
-    "4 file I/O failure, 5 device/driver/feature unavailable, 130 interrupted.";
+    "4 file I/O failure, 5 device/driver/feature unavailable, 6 empty or collapsed result\n"
+    "(0 or 1 point out of more; nothing written), 130 interrupted.";
 
 }  // namespace
 

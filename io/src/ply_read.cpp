@@ -386,7 +386,7 @@ void check_sizes(const Header& h, std::size_t file_size, const std::string& file
       throw InputError(file, line_place(e.header_line),
                        "element " + e.name + " declares " + std::to_string(e.count) +
                            " entries; with the elements before it that needs at least " +
-                           std::to_string(static_cast<std::uint64_t>(need)) + " bytes, but only " +
+                           io_detail::format_double(std::floor(need)) + " bytes, but only " +
                            std::to_string(file_size - h.data_offset) +
                            " bytes follow the header (truncated file or wrong count)");
   }
@@ -545,8 +545,8 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
         std::int32_t cell = -1;
         for (std::uint64_t j = 0; j < m; ++j) {
           const double v = body.value(p.type, p);
-          if (v < 0 || v >= static_cast<double>(n))
-            body.fail("vertex index " + std::to_string(static_cast<long long>(v)) +
+          if (!(v >= 0 && v < static_cast<double>(n)))  // NaN fails too
+            body.fail("vertex index " + io_detail::format_double(v) +
                       " out of range; expected 0.." + std::to_string(n) + "-1");
           if (j == 0) cell = static_cast<std::int32_t>(v);
         }
@@ -578,8 +578,8 @@ PlyContent read_ply_content(const std::filesystem::path& path, ReadReport* repor
           for (std::uint64_t j = 0; j < m; ++j) {
             const double v = body.value(p.type, p);
             if (static_cast<int>(k) != list_prop) continue;
-            if (v < 0 || v >= static_cast<double>(n))
-              body.fail("vertex index " + std::to_string(static_cast<long long>(v)) +
+            if (!(v >= 0 && v < static_cast<double>(n)))  // NaN fails too
+              body.fail("vertex index " + io_detail::format_double(v) +
                         " out of range; expected 0.." + std::to_string(n) + "-1");
             poly.push_back(static_cast<int>(v));
           }

@@ -24,11 +24,16 @@ std::string point_cloud_format(const std::filesystem::path& path) {
   return "";
 }
 
-PointCloud read_point_cloud(const std::filesystem::path& path, ReadReport* report) {
+PointCloud read_point_cloud(const std::filesystem::path& path, ReadReport* report,
+                            const XyzOptions& xyz) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw InputError(path.string(), "",
+                     "is a folder; expected a point-cloud file (.ply .pcd .xyz .txt)");
   const std::string f = point_cloud_format(path);
   if (f == "ply") return read_ply(path, report);
   if (f == "pcd") return read_pcd(path, report);
-  if (f == "xyz") return read_xyz(path, report);
+  if (f == "xyz") return read_xyz(path, report, xyz);
   throw InputError(path.string(), "",
                    "unsupported file extension '" + path.extension().string() +
                        "'; expected .ply, .pcd, .xyz or .txt");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <optional>
 #include <string>
 #include <thread>
@@ -113,6 +114,12 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
 
   bool have_last_index = false;
   std::uint64_t last_index = 0;
+  bool have_first_index = false, after_reconnect = false;
+  std::uint64_t first_index = 0, reconnects_seen = 0;
+  int attempts_used = 0;
+  std::int64_t last_host_ns = 0;
+  double period_sum = 0;
+  std::uint64_t period_count = 0;
   std::int64_t last_ts = 0;
   int consecutive_timeouts = 0;
   std::uint64_t position = 0;  // delivery position of the next kOk frame
@@ -144,6 +151,17 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     }
     if (status == ReadStatus::kEndOfStream) {
       st.stop = StopReason::kEndOfStream;
+      // Frames dropped after the last one delivered leave no index gap behind them: count them
+      // from the source's stated frame count, when the indices seen so far are consistent with
+      // it (indices first_index .. first_index + frame_count - 1).
+      if (have_first_index && st.info.frame_count && reconnects_seen == 0) {
+        const std::uint64_t expected_last = first_index + *st.info.frame_count - 1;
+        if (*st.info.frame_count > 0 && expected_last > last_index) {
+          st.trailing_dropped_frames = expected_last - last_index;
+          st.dropped_frames += st.trailing_dropped_frames;
+          ++st.gap_events;
+        }
+      }
       break;
     }
     if (status == ReadStatus::kError) {
@@ -155,7 +173,8 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
       ++st.disconnects;
       st.message = source.last_error();
       bool reopened = false;
-      for (int a = 0; a < options.reconnect_attempts && !reopened; ++a) {
+      while (attempts_used < options.reconnect_attempts && !reopened) {
+        ++attempts_used;
         if (options.keep_going && !options.keep_going()) break;
         source.close();
         std::this_thread::sleep_for(options.reconnect_delay);
@@ -168,14 +187,41 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
       }
       if (!reopened) {
         st.stop = StopReason::kDisconnected;
+        if (options.reconnect_attempts > 0 && attempts_used >= options.reconnect_attempts) {
+          st.reconnect_budget_exhausted = true;
+          st.message = "gave up after " + std::to_string(attempts_used) +
+                       " reconnect attempts in total (" + std::to_string(st.disconnects) +
+                       " disconnects)" + (st.message.empty() ? "" : "; last: " + st.message);
+        }
         break;
       }
       ++st.reconnects;
-      have_last_index = false;  // a reopened device restarts its indices
+      ++reconnects_seen;
+      after_reconnect = have_last_index;
+      have_last_index = false;  // a reopened device may restart its indices
       continue;
     }
     consecutive_timeouts = 0;
     ++st.frames_read;
+    if (!have_first_index) {
+      have_first_index = true;
+      first_index = frame.index;
+    }
+    if (after_reconnect) {
+      after_reconnect = false;
+      if (frame.index > last_index + 1) {
+        st.reconnect_lost_frames += frame.index - last_index - 1;  // the device kept counting
+      } else if (period_count > 0 && frame.host_ts_ns > last_host_ns) {
+        const double period = period_sum / static_cast<double>(period_count);
+        const double gap = static_cast<double>(frame.host_ts_ns - last_host_ns);
+        if (period > 0 && gap > 1.5 * period)
+          st.reconnect_lost_frames += static_cast<std::uint64_t>(std::llround(gap / period)) - 1;
+      }
+    } else if (have_last_index && frame.host_ts_ns > last_host_ns) {
+      period_sum += static_cast<double>(frame.host_ts_ns - last_host_ns);
+      ++period_count;
+    }
+    last_host_ns = frame.host_ts_ns;
     if (have_last_index && frame.index > last_index + 1) {
       st.dropped_frames += frame.index - last_index - 1;
       ++st.gap_events;

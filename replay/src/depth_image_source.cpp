@@ -11,6 +11,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "json_input.h"
 #include "png16.h"
 #include "scanclean/core/errors.h"
 
@@ -163,10 +164,21 @@ std::optional<std::pair<std::uint64_t, std::uint64_t>> tiff_size(
 Raw16 read_tiff16(const fs::path& file) {
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = detail::read_file_bytes(file, kMaxImageBytes);
-  if (auto size = tiff_size(bytes); size && size->first * size->second > kMaxPixels)
+  // The size the header declares is checked against the file before OpenCV allocates: the
+  // pixels (16 bits each) cannot be compressed better than about 1032:1 (deflate; 1100 allowed).
+  const auto size = tiff_size(bytes);
+  if (!size)
+    throw InputError(name, "TIFF header",
+                     "no image width and height found (not a classic TIFF, or corrupt)");
+  if (size->first * size->second > kMaxPixels)
     throw InputError(name, "TIFF header",
                      "implausible image size " + std::to_string(size->first) + "x" +
                          std::to_string(size->second));
+  if (size->first * size->second * 2 > 1100 * static_cast<std::uint64_t>(bytes.size()))
+    throw InputError(name, "TIFF header",
+                     std::to_string(size->first) + "x" + std::to_string(size->second) +
+                         " 16-bit pixels cannot be held in " + std::to_string(bytes.size()) +
+                         " bytes (truncated file or a lying header)");
   cv::Mat mat;
   try {
     mat = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
@@ -240,12 +252,7 @@ Sidecar read_sidecar(const fs::path& file) {
   using nlohmann::json;
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = detail::read_file_bytes(file, 1 << 20);
-  json j;
-  try {
-    j = json::parse(bytes.begin(), bytes.end());
-  } catch (const json::parse_error& e) {
-    throw InputError(name, byte_place(e.byte), std::string("not valid JSON: ") + e.what());
-  }
+  const json j = detail::parse_json_input(std::string(bytes.begin(), bytes.end()), name);
   if (!j.is_object()) throw InputError(name, "", "expected a JSON object");
   auto num = [&](const char* key) {
     if (!j.contains(key)) throw InputError(name, std::string("field ") + key, "missing");

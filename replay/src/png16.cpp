@@ -1,5 +1,7 @@
 #include "png16.h"
 
+#include <algorithm>
+#include <cctype>
 #include <fstream>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -178,16 +180,105 @@ void write_rgb_png_atomically(const std::filesystem::path& file,
   });
 }
 
+namespace {
+
+// The image size a PNG, JPEG or binary/ASCII PPM/PGM declares, checked against the file's real
+// size before the decoder allocates anything: a Netpbm raster must be in the file; a compressed
+// one cannot expand more than deflate's / JPEG's best ratio (about 1032:1; 1100 allowed). Any
+// other format is refused (the decoder would trust its header).
+void check_colour_image_size(const std::vector<unsigned char>& b, const std::string& name) {
+  const std::uint64_t size = b.size();
+  std::uint64_t w = 0, h = 0, raster = 0;  // raster: bytes the pixels need at least
+  bool compressed = true;
+  std::string kind;
+  if (size >= 8 && b[0] == 0x89 && b[1] == 'P') {
+    kind = "PNG";
+    const PngHeader ph = parse_png_header(b, name);
+    w = ph.width;
+    h = ph.height;
+    raster = w * h * (ph.color_type == 0 || ph.color_type == 3 ? 1 : 3);
+  } else if (size >= 4 && b[0] == 0xFF && b[1] == 0xD8) {
+    kind = "JPEG";
+    std::size_t i = 2;
+    while (i + 9 < size) {
+      if (b[i] != 0xFF) throw InputError(name, byte_place(i), "corrupt JPEG: expected a marker");
+      const unsigned m = b[i + 1];
+      if (m == 0xFF) {
+        ++i;
+        continue;
+      }
+      const std::size_t len = (std::size_t{b[i + 2]} << 8) | b[i + 3];
+      if (m >= 0xC0 && m <= 0xCF && m != 0xC4 && m != 0xC8 && m != 0xCC) {
+        h = (std::uint64_t{b[i + 5]} << 8) | b[i + 6];
+        w = (std::uint64_t{b[i + 7]} << 8) | b[i + 8];
+        break;
+      }
+      if (len < 2) throw InputError(name, byte_place(i), "corrupt JPEG: segment length < 2");
+      i += 2 + len;
+    }
+    if (w == 0 || h == 0)
+      throw InputError(name, "", "JPEG without a frame header (SOF) giving its size");
+    raster = w * h;
+  } else if (size >= 2 && b[0] == 'P' &&
+             (b[1] == '2' || b[1] == '3' || b[1] == '5' || b[1] == '6')) {
+    kind = "PPM/PGM";
+    compressed = false;
+    // "P6 <w> <h> <maxval>" with whitespace and # comments; then one whitespace byte.
+    std::size_t i = 2;
+    std::uint64_t v[3] = {0, 0, 0};
+    for (int k = 0; k < 3; ++k) {
+      for (;;) {
+        while (i < size && std::isspace(b[i])) ++i;
+        if (i < size && b[i] == '#') {
+          while (i < size && b[i] != '\n') ++i;
+          continue;
+        }
+        break;
+      }
+      std::size_t digits = 0;
+      while (i < size && b[i] >= '0' && b[i] <= '9' && digits < 10) {
+        v[k] = v[k] * 10 + (b[i] - '0');
+        ++i;
+        ++digits;
+      }
+      if (digits == 0 || digits == 10)
+        throw InputError(name, byte_place(i), "corrupt PPM/PGM header: expected a size");
+    }
+    w = v[0];
+    h = v[1];
+    if (v[2] == 0 || v[2] > 65535)
+      throw InputError(name, "header",
+                       "PPM/PGM maximum value " + std::to_string(v[2]) + " out of range 1..65535");
+    const std::uint64_t channels = (b[1] == '3' || b[1] == '6') ? 3 : 1;
+    const bool ascii = b[1] == '2' || b[1] == '3';
+    const std::uint64_t sample = ascii ? 2 : (v[2] > 255 ? 2 : 1);  // ASCII: digit + space
+    raster = w * h * channels * sample;
+    if (raster > size - std::min<std::uint64_t>(size, i + 1))
+      throw InputError(name, "header",
+                       std::to_string(w) + "x" + std::to_string(h) + " " +
+                           (channels == 3 ? "colour" : "gray") + " pixels need at least " +
+                           std::to_string(raster) + " bytes, but the file has " +
+                           std::to_string(size) + " (truncated file or wrong size)");
+  } else {
+    throw InputError(name, "", "not a PNG, JPEG or PPM/PGM colour image");
+  }
+  if (w == 0 || h == 0 || w * h > kMaxPixels)
+    throw InputError(name, kind + " header",
+                     "implausible image size " + std::to_string(w) + "x" + std::to_string(h) +
+                         " (at most 2^26 pixels)");
+  if (compressed && raster > 1100 * size)
+    throw InputError(name, kind + " header",
+                     std::to_string(w) + "x" + std::to_string(h) +
+                         " pixels cannot be compressed into " + std::to_string(size) +
+                         " bytes (truncated file or a lying header)");
+}
+
+}  // namespace
+
 Image<std::array<std::uint8_t, 3>> read_rgb_image(const std::filesystem::path& file) {
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = read_file_bytes(file, std::uintmax_t{1} << 28);
-  if (bytes.size() >= 8 && bytes[0] == 0x89 && bytes[1] == 'P') {
-    const PngHeader h = parse_png_header(bytes, name);
-    if (std::uint64_t{h.width} * h.height > kMaxPixels)
-      throw InputError(
-          name, "PNG header",
-          "implausible image size " + std::to_string(h.width) + "x" + std::to_string(h.height));
-  }
+  check_colour_image_size(bytes, name);
   cv::Mat mat;
   try {
     mat = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);

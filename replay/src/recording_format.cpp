@@ -6,6 +6,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "json_input.h"
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
 
@@ -177,12 +178,7 @@ std::string session_to_json(const SessionMetadata& s) {
 }
 
 SessionMetadata session_from_json(const std::string& text, const std::string& file) {
-  json j;
-  try {
-    j = json::parse(text);
-  } catch (const json::parse_error& e) {
-    throw InputError(file, byte_place(e.byte), std::string("not valid JSON: ") + e.what());
-  }
+  const json j = detail::parse_json_input(text, file);
   if (!j.is_object()) throw InputError(file, "", "expected a JSON object, got " + shown(j));
   Fields root(j, file, "");
   SessionMetadata s;

@@ -25,12 +25,17 @@ std::string frame_file(const char* subfolder, std::size_t ordinal) {
   return std::string(subfolder) + "/" + buf;
 }
 
+// Makes the renames into `dir` durable. A failed fsync is an IoError (the frame would not
+// survive a power loss); file systems that cannot sync a folder (EINVAL) are accepted.
 void sync_directory(const std::filesystem::path& dir) {
-  int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-  if (fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
-  }
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0)
+    throw IoError(dir.string() + ": cannot open the folder to sync it: " + std::strerror(errno));
+  const int rc = ::fsync(fd);
+  const int err = errno;
+  ::close(fd);
+  if (rc != 0 && err != EINVAL && err != EROFS)
+    throw IoError(dir.string() + ": fsync of the folder failed: " + std::strerror(err));
 }
 
 }  // namespace

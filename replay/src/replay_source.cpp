@@ -46,6 +46,7 @@ class ReplaySource final : public RangeSource {
     }
     info_ = info_from_session(reader_->session(), folder_.string());
     info_.frame_count = reader_->frame_count();
+    info_.warnings = reader_->warnings();
   }
 
   ReadStatus next(RangeFrame& frame, std::chrono::milliseconds timeout) override {

@@ -63,5 +63,59 @@ TEST(ErrorsTest, ExitCodesByType) {
                "f.ply: line 3: expected 3 numbers");
 }
 
+TEST(AtomicFileTest, CommitGroupCommitsAllOrNothing) {
+  auto dir = test::make_temp_dir("atomic");
+  {  // the second write fails: the first target must not change (a cloud and its outliers)
+    { std::ofstream(dir / "a.txt") << "old a"; }
+    AtomicCommitGroup group;
+    write_file_atomically(dir / "a.txt", [](std::ostream& os) { os << "new a"; });
+    EXPECT_EQ(slurp(dir / "a.txt"), "old a") << "renamed before the group committed";
+    EXPECT_THROW(write_file_atomically(dir / "b.txt",
+                                       [](std::ostream&) { throw std::runtime_error("full"); }),
+                 std::runtime_error);
+  }
+  EXPECT_EQ(slurp(dir / "a.txt"), "old a");
+  EXPECT_FALSE(std::filesystem::exists(dir / "b.txt"));
+  {
+    AtomicCommitGroup group;
+    write_file_atomically(dir / "a.txt", [](std::ostream& os) { os << "new a"; });
+    write_file_atomically(dir / "b.txt", [](std::ostream& os) { os << "new b"; });
+    group.commit();
+  }
+  EXPECT_EQ(slurp(dir / "a.txt"), "new a");
+  EXPECT_EQ(slurp(dir / "b.txt"), "new b");
+  int files = 0;
+  for ([[maybe_unused]] auto& e : std::filesystem::directory_iterator(dir)) ++files;
+  EXPECT_EQ(files, 2) << "temporary files left behind";
+  std::filesystem::remove_all(dir);
+}
+
+TEST(AtomicFileTest, TemporariesOfKilledProcessesAreRemoved) {
+  auto dir = test::make_temp_dir("atomic");
+  // pid 999999999 is above any Linux pid_max: that process is gone.
+  const auto stale = dir / ".out.ply.tmp.999999999.0";
+  const auto other = dir / "notes.tmp.txt";  // not a temporary of ours
+  { std::ofstream(stale) << "half a cloud"; }
+  { std::ofstream(other) << "keep"; }
+  const std::size_t before = stale_temporaries_removed();
+  write_file_atomically(dir / "x.txt", [](std::ostream& os) { os << "x"; });
+  EXPECT_FALSE(std::filesystem::exists(stale));
+  EXPECT_TRUE(std::filesystem::exists(other));
+  EXPECT_EQ(stale_temporaries_removed(), before + 1);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(AtomicFileTest, MissingFolderIsNamed) {
+  auto dir = test::make_temp_dir("atomic");
+  try {
+    AtomicFile f(dir / "no_such_folder" / "out.ply");
+    FAIL() << "no error";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("no_such_folder\" does not exist"), std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace scanclean

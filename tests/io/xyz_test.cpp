@@ -46,8 +46,8 @@ TEST_F(XyzTest, MalformedLinesNameTheLine) {
       test::input_error_of([&] { read_xyz(test::write_bytes(dir_ / "c.xyz", "1 2 3\n4 5\n")); });
   EXPECT_NE(m1.find("c.xyz: line 2"), std::string::npos) << m1;
   EXPECT_NE(m1.find("expected 3 numbers"), std::string::npos) << m1;
-  const std::string m2 =
-      test::input_error_of([&] { read_xyz(test::write_bytes(dir_ / "d.xyz", "# c\n1 2 3 4\n")); });
+  const std::string m2 = test::input_error_of(
+      [&] { read_xyz(test::write_bytes(dir_ / "d.xyz", "# c\n1 2 3 4 5\n")); });
   EXPECT_NE(m2.find("line 2"), std::string::npos) << m2;
   const std::string m3 = test::input_error_of(
       [&] { read_xyz(test::write_bytes(dir_ / "e.xyz", "1 2 3\n1 two 3\n")); });

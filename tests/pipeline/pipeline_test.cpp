@@ -1,6 +1,7 @@
 #include "scanclean/pipeline/pipeline.h"
 
 #include <gtest/gtest.h>
+#include <optional>
 
 #include <deque>
 #include <vector>
@@ -44,12 +45,14 @@ class ScriptedSource : public RangeSource {
   SourceInfo info() const override {
     SourceInfo i = test::primesense_info(K_);
     i.kind = "scripted";
+    i.frame_count = frame_count;
     return i;
   }
   void close() override { ++closes; }
   std::string last_error() const override { return "scripted"; }
   int opens = 0, closes = 0, eos_calls = 0;
   bool fail_reopen = false;
+  std::optional<std::uint64_t> frame_count;  //!< stated in info() when set
 
  private:
   std::vector<Step> steps_;
@@ -160,6 +163,43 @@ TEST(PipelineTest, DisconnectStopsCleanlyKeepingFramesOrReconnects) {
     EXPECT_EQ(st.stop, StopReason::kDisconnected);
     EXPECT_EQ(src.opens, 3);
   }
+}
+
+TEST(PipelineTest, FramesDroppedAtTheEndOfAStatedStreamAreCounted) {
+  // The source states 6 frames (indices 10..15) but delivers 10..13: the last two were dropped
+  // and leave no gap behind them.
+  ScriptedSource src(ok_frames(10, 4));
+  src.frame_count = 6;
+  const PipelineStats st = run_pipeline(src, raw_options(), {});
+  EXPECT_EQ(st.stop, StopReason::kEndOfStream);
+  EXPECT_EQ(st.trailing_dropped_frames, 2u);
+  EXPECT_EQ(st.dropped_frames, 2u);
+  // A complete stream has none.
+  ScriptedSource full(ok_frames(10, 6));
+  full.frame_count = 6;
+  EXPECT_EQ(run_pipeline(full, raw_options(), {}).dropped_frames, 0u);
+}
+
+TEST(PipelineTest, ReconnectAttemptsAreABudgetForTheWholeRun) {
+  // A source that disconnects after every frame and always reopens: with a per-disconnect bound
+  // it would never end; the budget of 3 attempts ends it after 3 reconnects.
+  std::vector<ScriptedSource::Step> steps;
+  for (std::uint64_t i = 0; i < 50; ++i) {
+    steps.push_back({ReadStatus::kOk, i * 4});  // the device keeps counting: 3 lost per reconnect
+    steps.push_back({ReadStatus::kDisconnected, 0});
+  }
+  ScriptedSource src(steps);
+  PipelineOptions o = raw_options();
+  o.reconnect_attempts = 3;
+  o.reconnect_delay = 1ms;
+  const PipelineStats st = run_pipeline(src, o, {});
+  EXPECT_EQ(st.stop, StopReason::kDisconnected);
+  EXPECT_TRUE(st.reconnect_budget_exhausted);
+  EXPECT_EQ(st.reconnects, 3u);
+  EXPECT_EQ(st.disconnects, 4u);
+  EXPECT_EQ(st.frames_read, 4u);
+  EXPECT_EQ(st.reconnect_lost_frames, 9u);
+  EXPECT_NE(st.message.find("gave up after 3 reconnect attempts"), std::string::npos) << st.message;
 }
 
 TEST(PipelineTest, InterruptWritesWhatWasCaptured) {

@@ -56,6 +56,7 @@ enum class ExitCode : int {
   kBadInput = 3,      //!< malformed or unsupported input data
   kIoFailure = 4,     //!< cannot read or write a file
   kUnavailable = 5,   //!< no device / driver / feature
+  kEmptyResult = 6,   //!< the result is empty or collapsed (<= 1 point from more); not written
   kInterrupted = 130  //!< stopped by SIGINT (recordings stay valid up to the last frame)
 };
 

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "scanclean/core/range_frame.h"
 
@@ -37,6 +38,9 @@ struct SourceInfo {
   std::string noise_model =
       "none";  //!< "nguyen2012" (PrimeSense class), "structured-light", "none"
   std::optional<Ps1080Params> ps1080;
+  //! Recoverable problems found while opening (e.g. a recording's partial last frames.csv line,
+  //! ignored); the program prints them.
+  std::vector<std::string> warnings;
 };
 
 class RangeSource {

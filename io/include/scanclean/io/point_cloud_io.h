@@ -40,7 +40,9 @@ std::string point_cloud_format(const std::filesystem::path& path);
 
 //! Reads .ply, .pcd, .xyz or .txt. \throw InputError (unsupported extension, malformed file),
 //! IoError (cannot open/read).
-PointCloud read_point_cloud(const std::filesystem::path& path, ReadReport* report = nullptr);
+//! `xyz` applies to .xyz/.txt files only. A folder is reported as a folder.
+PointCloud read_point_cloud(const std::filesystem::path& path, ReadReport* report = nullptr,
+                            const XyzOptions& xyz = {});
 
 //! Writes by OUT's extension, atomically. \throw OptionError (unsupported extension or option),
 //! IoError.

@@ -30,7 +30,9 @@ struct PipelineOptions {
   std::chrono::milliseconds timeout{2000};  //!< per next() call
   //! Stop after this many consecutive timeouts (0 = never; live sources report kDisconnected).
   int max_consecutive_timeouts = 0;
-  //! On kDisconnected: close(), then open() again up to this many times (0 = stop cleanly).
+  //! On kDisconnected: close(), then open() again. This is the budget of open() attempts over
+  //! the whole run, not per disconnect, so a source that keeps disconnecting ends (0 = stop
+  //! cleanly at the first disconnect).
   int reconnect_attempts = 0;
   std::chrono::milliseconds reconnect_delay{500};
   bool raw = false;  //!< no filter: each window's points are the output (normals, confidences)
@@ -78,6 +80,13 @@ struct PipelineStats {
   std::uint64_t gap_events = 0;      //!< places where the index jumped by more than 1
   std::uint64_t timeouts = 0;
   std::uint64_t disconnects = 0, reconnects = 0;
+  //! Frames lost across reconnects: the index gap when the device kept counting, else estimated
+  //! from the host-time gap and the mean frame period.
+  std::uint64_t reconnect_lost_frames = 0;
+  //! Source indices missing after the last delivered frame (end of stream of a source that
+  //! states its frame count); also included in dropped_frames.
+  std::uint64_t trailing_dropped_frames = 0;
+  bool reconnect_budget_exhausted = false;      //!< stopped: every reconnect attempt was used
   std::uint64_t non_increasing_timestamps = 0;  //!< device timestamps that did not increase
   std::size_t windows = 0;
   std::size_t points_in = 0;        //!< points from frame_to_points over all used frames
