@@ -219,6 +219,7 @@ TEST(SlFormatTest, HandMadePixelsDecodeAsSpecified) {
     o.decoder = decoder;
     o.white_threshold = 5;
     o.black_threshold = 150;
+    o.sub_stripe = false;  // the integer decode's rules (sub-stripe: SlSubStripeTest)
     const SlDecoded d = decode_graycode(cap, o);
     SCOPED_TRACE(to_string(decoder));
     // x=0: Gray 11 -> binary 10 = column 2, row 0.
@@ -243,6 +244,7 @@ TEST(SlFormatTest, HandMadePixelsDecodeAsSpecified) {
     o.decoder = decoder;
     o.white_threshold = 0;
     o.black_threshold = 150;
+    o.sub_stripe = false;  // the integer decode's rules (sub-stripe: SlSubStripeTest)
     const SlDecoded d = decode_graycode(cap, o);
     EXPECT_EQ(d.status(1, 0), 0) << to_string(decoder);
     EXPECT_EQ(d.column(1, 0), 0);
