@@ -313,44 +313,48 @@ void refine_sub_stripe(const SlCapture::Impl& cap, const SlDecodeOptions& opt, S
   out.row_f = Image<float>(w, h, nan);
   const cv::Mat& white = cap.images[static_cast<std::size_t>(cap.info.white_index)];
   const Pixel* W = reinterpret_cast<const Pixel*>(white.data);
-  std::size_t bracketed = 0;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      if (out.status.data[i] != static_cast<std::uint8_t>(SlPixelStatus::kValid)) continue;
-      double factor = 1.0;
-      bool both = true;
-      for (int a = 0; a < 2; ++a) {
-        const auto& A = axes[a];
-        const int bits = a == 0 ? cap.info.graycode.column_bits : cap.info.graycode.row_bits;
-        const double stripe = static_cast<double>(1 << std::min(opt.sub_stripe_level, bits - 1));
-        const float e0 = A.est[0][i], e1 = A.est[1][i];
-        double v = a == 0 ? out.column.data[i] : out.row.data[i];
-        if (!std::isnan(e0) && !std::isnan(e1)) {
-          const double w0 = 1.0 / A.span[0][i], w1 = 1.0 / A.span[1][i];
-          v = (w0 * e0 + w1 * e1) / (w0 + w1);
-          const double dis = (e0 - e1) / (0.5 * stripe);
-          factor *= std::exp(-dis * dis);
-        } else if (!std::isnan(e0)) {
-          v = e0;
-        } else if (!std::isnan(e1)) {
-          v = e1;
-        } else {
-          factor *= 0.5;
-          both = false;
+  std::vector<std::size_t> bracketed_rows(static_cast<std::size_t>(h), 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y)
+      for (int x = 0; x < w; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * w + x;
+        if (out.status.data[i] != static_cast<std::uint8_t>(SlPixelStatus::kValid)) continue;
+        double factor = 1.0;
+        bool both = true;
+        for (int a = 0; a < 2; ++a) {
+          const auto& A = axes[a];
+          const int bits = a == 0 ? cap.info.graycode.column_bits : cap.info.graycode.row_bits;
+          const double stripe = static_cast<double>(1 << std::min(opt.sub_stripe_level, bits - 1));
+          const float e0 = A.est[0][i], e1 = A.est[1][i];
+          double v = a == 0 ? out.column.data[i] : out.row.data[i];
+          if (!std::isnan(e0) && !std::isnan(e1)) {
+            const double w0 = 1.0 / A.span[0][i], w1 = 1.0 / A.span[1][i];
+            v = (w0 * e0 + w1 * e1) / (w0 + w1);
+            const double dis = (e0 - e1) / (0.5 * stripe);
+            factor *= std::exp(-dis * dis);
+          } else if (!std::isnan(e0)) {
+            v = e0;
+          } else if (!std::isnan(e1)) {
+            v = e1;
+          } else {
+            factor *= 0.5;
+            both = false;
+          }
+          (a == 0 ? out.column_f : out.row_f).data[i] = static_cast<float>(v);
         }
-        (a == 0 ? out.column_f : out.row_f).data[i] = static_cast<float>(v);
+        bracketed_rows[static_cast<std::size_t>(y)] += both;
+        // Mixed pixels at printed texture edges: relative gradient of the white image.
+        if (x > 0 && y > 0 && x + 1 < w && y + 1 < h) {
+          const double gx = 0.5 * (static_cast<double>(W[i + 1]) - W[i - 1]);
+          const double gy = 0.5 * (static_cast<double>(W[i + w]) - W[i - w]);
+          const double g = std::hypot(gx, gy) / std::max(1.0, static_cast<double>(W[i]));
+          factor /= 1.0 + (g / 0.25) * (g / 0.25);
+        }
+        out.confidence.data[i] = static_cast<float>(out.confidence.data[i] * factor);
       }
-      bracketed += both;
-      // Mixed pixels at printed texture edges: relative gradient of the white image.
-      if (x > 0 && y > 0 && x + 1 < w && y + 1 < h) {
-        const double gx = 0.5 * (static_cast<double>(W[i + 1]) - W[i - 1]);
-        const double gy = 0.5 * (static_cast<double>(W[i + w]) - W[i - w]);
-        const double g = std::hypot(gx, gy) / std::max(1.0, static_cast<double>(W[i]));
-        factor /= 1.0 + (g / 0.25) * (g / 0.25);
-      }
-      out.confidence.data[i] = static_cast<float>(out.confidence.data[i] * factor);
-    }
+  });
+  std::size_t bracketed = 0;
+  for (std::size_t b : bracketed_rows) bracketed += b;
   out.sub_stripe_pixels = bracketed;
 }
 

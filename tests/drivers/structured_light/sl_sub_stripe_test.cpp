@@ -117,7 +117,6 @@ TEST(SlCalibrateTest, RecoversIntrinsicsAndPoseFromFourBoardPoses) {
     s.plane_point = poses[k].second;
     s.board_x_dir = Eigen::Vector3d(1, 0.1 * static_cast<double>(k) - 0.15, 0);
     s.seed = 11 + k;
-    s.supersample = 1;  // fast; corners and edges are still sub-pixel through the blur
     const test::SlRendered r = test::render_sl_capture(truth, s);
     SlCaptureInfo info = info_for(truth);
     info.folder = "pose" + std::to_string(k);
