@@ -183,6 +183,16 @@ TEST(SlFormatTest, InconsistentCountIsNamed) {
   expect_input_error([&] { describe_sl_capture(folder); }, {"capture.json", "invalid JSON"});
 }
 
+TEST(SlFormatTest, OversizedCaptureDescriptionIsRefused) {
+  const fs::path folder = write_small("sl_big_json");
+  {
+    std::ofstream out(folder / "capture.json", std::ios::binary | std::ios::trunc);
+    out << "{\"pad\": \"" << std::string(70000, 'x') << "\"}";
+  }
+  expect_input_error([&] { describe_sl_capture(folder); },
+                     {"capture.json", "larger than 65536 bytes"});
+}
+
 TEST(SlFormatTest, NoCalibrationIsNamed) {
   const fs::path folder = write_small("sl_nocalib");
   fs::remove(folder / "calib.yml");
