@@ -238,10 +238,14 @@ int run_decode(const SlCommandOptions& c) {
                    ? " (estimated, median reprojection " +
                          std::to_string(r.step_median_reprojection_px).substr(0, 5) + " px)"
                    : ""));
-  sum.add("calibration", r.calibration.file.string() + " (unit " +
-                             std::to_string(r.calibration.unit_m * 1000).substr(0, 6) + " mm" +
-                             (r.calibration.unit_assumed && c.unit_m == 0 ? ", assumed" : "") +
-                             ")");
+  {
+    const double unit = c.unit_m > 0 ? c.unit_m : r.calibration.unit_m;
+    char u[64];
+    std::snprintf(u, sizeof u, "%g m", unit);
+    sum.add("calibration", r.calibration.file.string() + " (unit " + u +
+                               (r.calibration.unit_assumed && c.unit_m == 0 ? ", assumed" : "") +
+                               ")");
+  }
   const double pixels = static_cast<double>(r.decoded.status.size());
   sum.add("lit pixels", 100.0 * r.decoded.lit / pixels, 1, "%");
   sum.add("valid pixels", 100.0 * r.decoded.valid / pixels, 1, "%");

@@ -178,7 +178,13 @@ template <class Pixel>
 class SubStripe {
  public:
   SubStripe(const SlCapture::Impl& cap, const SlDecodeOptions& opt, const SlDecoded& out)
-      : cap_(cap), opt_(opt), out_(out), w_(cap.images[0].cols), h_(cap.images[0].rows) {}
+      : cap_(cap),
+        opt_(opt),
+        out_(out),
+        white_(cap.images[static_cast<std::size_t>(cap.info.white_index)]),
+        black_(cap.images[static_cast<std::size_t>(cap.info.black_index)]),
+        w_(cap.images[0].cols),
+        h_(cap.images[0].rows) {}
 
   SubStripeAxis run(int axis) const {
     SubStripeAxis r;
@@ -208,9 +214,14 @@ class SubStripe {
     double P;    // projector coordinate of the stripe boundary
   };
 
+  // I - I_inv divided by the pixel's white - black contrast: the printed albedo changes from one
+  // pixel to the next at texture edges, which would move the crossing of the raw difference.
   double diff(const cv::Mat& p, const cv::Mat& q, std::size_t i) const {
-    return static_cast<double>(reinterpret_cast<const Pixel*>(p.data)[i]) -
-           static_cast<double>(reinterpret_cast<const Pixel*>(q.data)[i]);
+    const double d = static_cast<double>(reinterpret_cast<const Pixel*>(p.data)[i]) -
+                     static_cast<double>(reinterpret_cast<const Pixel*>(q.data)[i]);
+    const double c = static_cast<double>(reinterpret_cast<const Pixel*>(white_.data)[i]) -
+                     static_cast<double>(reinterpret_cast<const Pixel*>(black_.data)[i]);
+    return d / std::max(c, 1.0);
   }
 
   // One line of `len` pixels starting at linear index `start`, `stride` apart.
@@ -300,6 +311,8 @@ class SubStripe {
   const SlCapture::Impl& cap_;
   const SlDecodeOptions& opt_;
   const SlDecoded& out_;
+  const cv::Mat& white_;
+  const cv::Mat& black_;
   int w_, h_;
 };
 

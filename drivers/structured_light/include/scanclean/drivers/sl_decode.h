@@ -13,15 +13,19 @@
 //! Sub-stripe decoding (on by default, SlDecodeOptions::sub_stripe): the integer code of each
 //! axis, truncated to the Gray-code bits at and above `sub_stripe_level`, changes by one at the
 //! stripe edges. Along every camera row and every camera column each such edge is located where
-//! the flipping bit's pattern and inverse intensities cross (linear interpolation of I - I_inv
-//! between the two pixels on either side), and a pixel between two edges gets the projector
-//! coordinate interpolated linearly between the edges' projector coordinates (the stripe
-//! boundary (j + 1) 2^level - 0.5). The row and column scans are averaged (weights 1 / edge
-//! spacing). The confidence of a valid pixel is then multiplied by
-//!  - 0.25 when no pair of edges brackets it (the integer code is kept),
+//! the flipping bit's pattern and inverse intensities cross: linear interpolation of
+//! (I - I_inv) / (white - black) between the two pixels around its sign change (the division
+//! removes the printed albedo's change from pixel to pixel). Runs of up to 3 weak-bit pixels
+//! (pattern and inverse too close: typically right on a fine stripe edge) do not break a scan
+//! line; invalid pixels of other kinds and jumps of the code do. A valid pixel between two edges
+//! gets the projector coordinate interpolated linearly between the edges' coordinates (the
+//! stripe boundary (j + 1) 2^level - 0.5); the row and column scans are averaged (weights
+//! 1 / edge spacing). The integer decode (column, row, status, valid) is unchanged. The
+//! confidence of a valid pixel is then multiplied by
+//!  - 0.5 for each axis that no pair of edges brackets (that axis keeps the integer code),
 //!  - 1 / (1 + (g / 0.25)^2) with g = |grad white| / white (central differences): mixed pixels
-//!    at printed texture edges, where the crossing is biased,
-//!  - exp(-(e / 0.5 stripe)^2) with e the disagreement of the row and column scans.
+//!    at printed texture edges,
+//!  - exp(-(e / 0.5 stripe)^2) per axis, e = the disagreement of the row and column scans.
 
 #include <cstddef>
 #include <cstdint>
