@@ -400,6 +400,9 @@ int run_calibrate(const SlCommandOptions& c) {
       throw InputError(a, "", "not a structured-light capture (capture.json or graycode_00.png)");
     folders.insert(folders.end(), found.begin(), found.end());
   }
+  if (static_cast<int>(folders.size()) < co.min_views)
+    throw OptionError("sl calibrate: " + std::to_string(folders.size()) + " capture(s) given, " +
+                      std::to_string(co.min_views) + " board poses needed");
   int pw = 0, ph = 0;
   if (!c.projector.empty()) std::tie(pw, ph) = parse_size(c.projector);
   std::optional<SlCalibration> reference;
