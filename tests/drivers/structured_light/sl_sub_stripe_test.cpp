@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -86,6 +87,41 @@ TEST(SlSubStripeTest, FarCloserToTheTruthThanTheIntegerDecode) {
   EXPECT_GT(ei.coord_rms, 0.2);
   EXPECT_LT(es.coord_rms, ei.coord_rms / 3);
   EXPECT_LT(es.plane_rms_mm, ei.plane_rms_mm / 3);
+}
+
+TEST(SlSubStripeTest, LowConfidenceMarksTheLessAccurateCoordinates) {
+  // A chessboard (printed edges: mixed pixels) at the fixture's full resolution.
+  const SlCalibration c = test::make_sl_calibration();
+  test::SlScene scene;
+  scene.with_sphere = false;
+  scene.chessboard = true;
+  scene.square_mm = 15;
+  scene.supersample = 2;
+  const test::SlRendered r = test::render_sl_capture(c, scene);
+  const SlDecoded d = decode_graycode(SlCapture::from_images(info_for(c), r.images));
+  std::vector<std::pair<float, double>> conf_err;  // confidence, coordinate error (px)
+  for (int v = 0; v < c.camera.height; ++v)
+    for (int u = 0; u < c.camera.width; ++u) {
+      const std::size_t i = static_cast<std::size_t>(v) * c.camera.width + u;
+      if (d.column.data[i] < 0 || r.truth.surface(u, v) != 0) continue;
+      const Eigen::Vector2d t = r.truth.proj(u, v);
+      conf_err.emplace_back(d.confidence.data[i],
+                            std::hypot(d.column_f.data[i] - t.x(), d.row_f.data[i] - t.y()));
+    }
+  ASSERT_GT(conf_err.size(), 50000u);
+  std::sort(conf_err.begin(), conf_err.end());
+  // Mean error of the least confident tenth against the most confident half.
+  const std::size_t n = conf_err.size();
+  double low = 0, high = 0;
+  for (std::size_t k = 0; k < n / 10; ++k) low += conf_err[k].second;
+  for (std::size_t k = n / 2; k < n; ++k) high += conf_err[k].second;
+  low /= static_cast<double>(n / 10);
+  high /= static_cast<double>(n - n / 2);
+  std::printf(
+      "chessboard: mean coordinate error %.3f px (least confident 10 %%), %.3f px (most "
+      "confident half)\n",
+      low, high);
+  EXPECT_GT(low, 2 * high);
 }
 
 TEST(SlSubStripeTest, OptionsAreValidated) {
