@@ -1,6 +1,7 @@
 #include "scanclean/drivers/sl_calibration.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <array>
 #include <cctype>
 #include <cmath>
@@ -46,6 +47,7 @@ class Parser {
       fail(0, "larger than " + std::to_string(kMaxCalibrationBytes) + " bytes");
     for (std::size_t i = 0; i < t_.size(); ++i) {
       const unsigned char ch = static_cast<unsigned char>(t_[i]);
+      if (ch == '\n') newlines_.push_back(i);
       if (ch == 0 || (ch < 32 && ch != '\n' && ch != '\r' && ch != '\t') || ch >= 127)
         fail(line_at(i), "byte " + std::to_string(ch) + " at offset " + std::to_string(i) +
                              ": expected printable ASCII text (a YAML or XML calibration)");
@@ -60,10 +62,10 @@ class Parser {
   [[noreturn]] void fail(int line, const std::string& what) const {
     throw InputError(name_, line > 0 ? "line " + std::to_string(line) : std::string(), what);
   }
+  // 1-based line of a byte offset (binary search in the newline offsets, O(log n)).
   int line_at(std::size_t pos) const {
-    int l = 1;
-    for (std::size_t k = 0; k < pos && k < t_.size(); ++k) l += t_[k] == '\n';
-    return l;
+    return 1 + static_cast<int>(std::lower_bound(newlines_.begin(), newlines_.end(), pos) -
+                                newlines_.begin());
   }
   void skip_space(std::size_t& i) const {
     while (i < t_.size() && std::isspace(static_cast<unsigned char>(t_[i]))) ++i;
@@ -441,6 +443,7 @@ class Parser {
 
   std::string_view t_;
   const std::string& name_;
+  std::vector<std::size_t> newlines_;  // offsets of '\n', filled by the byte check
 };
 
 std::string describe_shape(const Value& v) {
