@@ -1,6 +1,7 @@
 // scanclean sl: structured light (Gray code). `sl patterns` writes the projector images and
 // capture.json; `sl decode` decodes a capture folder, triangulates it with the camera-projector
-// calibration, optionally filters the points and writes a point cloud.
+// calibration, optionally filters the points and writes a point cloud; `sl calibrate` computes
+// the camera-projector calibration from chessboard captures.
 
 #if defined(SCANCLEAN_HAVE_SL)
 
@@ -9,11 +10,15 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/core/progress.h"
+#include "scanclean/drivers/sl_board.h"
+#include "scanclean/drivers/sl_calibrate.h"
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
 #include "scanclean/summary.h"
@@ -51,7 +56,56 @@ struct SlCommandOptions {
   double plane_band = 0.01;
   bool ascii = false;
   int threads = 0;
+  // sub-stripe decoding (decode, calibrate)
+  bool integer = false;
+  int sub_stripe_level = 0;
+  // chessboard (decode --fit-plane, calibrate)
+  std::string board = "9x7";
+  double square_m = 0.075;
+  double window_m = 0.30;
+  std::string residual_map;
+  double residual_range_m = 0.005;
+  // calibrate
+  std::vector<std::string> captures;
+  std::string kamino_xml;
+  std::string compare;
+  int corner_window = 20;
+  bool estimate_k3 = false;
+  bool zero_tangential = false;
 };
+
+//! The parent folder of an output must exist and the extension be one of `exts`.
+void check_output(const std::string& option, const std::string& file,
+                  const std::vector<std::string>& exts) {
+  const std::filesystem::path p(file);
+  std::string ext = p.extension().string();
+  for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  bool ok = false;
+  std::string list;
+  for (const auto& e : exts) {
+    ok = ok || ext == e;
+    list += (list.empty() ? "" : " ") + e;
+  }
+  if (!ok) throw OptionError(option + ": '" + file + "' must end in one of: " + list);
+  const auto parent = p.parent_path();
+  std::error_code ec;
+  if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
+    throw OptionError(option + ": folder '" + parent.string() + "' does not exist");
+}
+
+SlChessboard chessboard_of(const SlCommandOptions& c) {
+  SlChessboard b;
+  parse_chessboard_size(c.board, b);
+  b.square_m = c.square_m;
+  validate(b);
+  return b;
+}
+
+std::string mm(double metres, int precision = 3) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f mm", precision, metres * 1e3);
+  return buf;
+}
 
 std::pair<int, int> parse_size(const std::string& s) {
   int w = 0, h = 0;
@@ -100,6 +154,33 @@ PointCloud frame_cloud(const RangeFrame& frame, std::string* how) {
 #endif
 }
 
+void plane_rms(Summary& sum, const PointCloud& pc, double band, const char* key) {
+  if (pc.size() < 3) return;
+  PlaneFitOptions po;
+  po.inlier_threshold = band;
+  const PlaneFit f = fit_plane_robust(pc.positions, po);
+  sum.add(key, std::to_string(f.rms * 1e3).substr(0, 6) + " mm RMS over " +
+                   std::to_string(100.0 * f.inliers.size() / pc.size()).substr(0, 5) +
+                   " % of the points (band " + std::to_string(band * 1e3).substr(0, 5) + " mm)");
+}
+
+//! Summary lines "<prefix>board" and "<prefix>window" (RMS, p95, points) of one cloud.
+SlBoardMeasurement board_report(Summary& sum, const std::vector<Eigen::Vector3d>& points,
+                                const SlBoardRegion& region, const SlBoardMeasureOptions& bo,
+                                const std::string& where, const std::string& prefix) {
+  const SlBoardMeasurement m = measure_sl_board(points, region, bo, where);
+  auto line = [](const SlPlaneStats& s) {
+    return mm(s.rms_m) + " RMS, " + mm(s.p95_m) + " p95 over " + with_thousands(s.points) +
+           " points (" + std::to_string(100.0 * s.inliers).substr(0, 5) + " % in the band)";
+  };
+  sum.add(prefix + "board plane", line(m.board));
+  char win[64];
+  std::snprintf(win, sizeof win, "%s%.0fx%.0f cm window", prefix.c_str(), bo.window_m * 100,
+                bo.window_m * 100);
+  sum.add(win, line(m.window));
+  return m;
+}
+
 int run_decode(const SlCommandOptions& c) {
 #if !defined(SCANCLEAN_HAVE_IO)
   (void)c;
@@ -114,11 +195,24 @@ int run_decode(const SlCommandOptions& c) {
   o.threads = c.threads;
   o.triangulation.max_reprojection_px = c.max_reprojection_px;
   o.triangulation.calibration_unit_m = c.unit_m;
+  o.sub_stripe = !c.integer;
+  o.sub_stripe_level = c.sub_stripe_level;
   if (!c.projector.empty())
     std::tie(o.projector_width, o.projector_height) = parse_size(c.projector);
   validate(o);
   if (!(c.plane_band > 0)) throw OptionError("--plane-band: expected > 0 metres");
   if (c.filter_h < 0) throw OptionError("--filter-h: expected > 0 metres (or 0 = automatic)");
+  SlBoardMeasureOptions bo;
+  bo.board = chessboard_of(c);
+  bo.window_m = c.window_m;
+  bo.band_m = c.plane_band;
+  validate(bo);
+  if (!(c.residual_range_m > 0)) throw OptionError("--residual-range: expected > 0 metres");
+  if (!c.residual_map.empty()) {
+    if (!c.fit_plane) throw OptionError("--residual-map needs --fit-plane");
+    check_output("--residual-map", c.residual_map + "_raw.png", {".png"});
+  }
+  check_output("-o", c.output, {".ply", ".pcd", ".xyz"});
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
     throw InputError(c.capture, "",
@@ -145,16 +239,28 @@ int run_decode(const SlCommandOptions& c) {
                    ? " (estimated, median reprojection " +
                          std::to_string(r.step_median_reprojection_px).substr(0, 5) + " px)"
                    : ""));
-  sum.add("calibration", r.calibration.file.string() + " (unit " +
-                             std::to_string(r.calibration.unit_m * 1000).substr(0, 6) + " mm" +
-                             (r.calibration.unit_assumed && c.unit_m == 0 ? ", assumed" : "") +
-                             ")");
+  {
+    const double unit = c.unit_m > 0 ? c.unit_m : r.calibration.unit_m;
+    char u[64];
+    std::snprintf(u, sizeof u, "%g m", unit);
+    sum.add("calibration", r.calibration.file.string() + " (unit " + u +
+                               (r.calibration.unit_assumed && c.unit_m == 0 ? ", assumed" : "") +
+                               ")");
+  }
   const double pixels = static_cast<double>(r.decoded.status.size());
   sum.add("lit pixels", 100.0 * r.decoded.lit / pixels, 1, "%");
   sum.add("valid pixels", 100.0 * r.decoded.valid / pixels, 1, "%");
-  sum.add("decode", std::string(to_string(r.decoded.decoder)) + ", " +
-                        std::to_string(r.decoded.seconds * 1e3).substr(0, 6) + " ms (load " +
-                        std::to_string(r.load_seconds).substr(0, 5) + " s)");
+  sum.add("decode",
+          std::string(to_string(r.decoded.decoder)) +
+              (o.sub_stripe ? ", sub-stripe (level " + std::to_string(o.sub_stripe_level) + ")"
+                            : ", integer") +
+              ", " + std::to_string(r.decoded.seconds * 1e3).substr(0, 6) + " ms (load " +
+              std::to_string(r.load_seconds).substr(0, 5) + " s)");
+  if (o.sub_stripe)
+    sum.add("sub-stripe pixels",
+            100.0 * r.decoded.sub_stripe_pixels /
+                std::max<double>(1.0, static_cast<double>(r.decoded.valid)),
+            1, "% of the valid (both axes between two edges)");
   sum.add_count("triangulated", r.triangulation.points);
   sum.add("epipolar check",
           with_thousands(r.triangulation.rejected_reprojection) + " rejected (> " +
@@ -163,18 +269,31 @@ int run_decode(const SlCommandOptions& c) {
   sum.add_count("points", cloud.size());
   sum.add("points from", how);
 
-  auto plane_rms = [&](const PointCloud& pc, const char* key) {
-    if (pc.size() < 3) return;
-    PlaneFitOptions po;
-    po.inlier_threshold = c.plane_band;
-    const PlaneFit f = fit_plane_robust(pc.positions, po);
-    sum.add(key, std::to_string(f.rms * 1e3).substr(0, 6) + " mm RMS over " +
-                     std::to_string(100.0 * f.inliers.size() / pc.size()).substr(0, 5) +
-                     " % of the points (band " + std::to_string(c.plane_band * 1e3).substr(0, 5) +
-                     " mm)");
-  };
-  if (c.fit_plane) plane_rms(cloud, c.filter ? "plane residual before" : "plane residual");
-
+  // --fit-plane: the chessboard's plane residual (board_report), else the whole scene's.
+  std::optional<SlBoardRegion> region;
+  std::optional<SlBoardMeasurement> raw_board;
+  if (c.fit_plane) {
+    const SlBoardCorners corners = find_sl_board_corners(r.capture, r.decoded, bo.board);
+    if (corners.found) {
+      region.emplace(corners, r.calibration, bo, c.capture);
+      const SlSquareSize sq = measure_sl_squares(corners, r.calibration, bo.board);
+      sum.add("board", std::to_string(bo.board.cols) + "x" + std::to_string(bo.board.rows) +
+                           " inner corners, " + std::to_string(corners.projector_found()) +
+                           " decoded; square " + mm(sq.mean_m) + " mean, " + mm(sq.std_m) +
+                           " sd over " + std::to_string(sq.count) + " (" +
+                           mm(bo.board.square_m, 1) + " nominal)");
+      raw_board =
+          board_report(sum, cloud.positions, *region, bo, c.capture, c.filter ? "raw " : "");
+      if (!c.residual_map.empty()) {
+        write_sl_residual_map(c.residual_map + "_raw.png", cloud.positions, *raw_board, *region,
+                              r.calibration, c.residual_range_m);
+        sum.add("residual map", c.residual_map + "_raw.png");
+      }
+    } else {
+      sum.add("board", "chessboard " + c.board + " not found; plane over the whole scene");
+      plane_rms(sum, cloud, c.plane_band, c.filter ? "plane residual before" : "plane residual");
+    }
+  }
   if (c.filter) {
 #if defined(SCANCLEAN_HAVE_FILTER)
     FilterCliValues fv;  // the shared mapping (filter_options_cli.h)
@@ -189,7 +308,17 @@ int run_decode(const SlCommandOptions& c) {
                           std::to_string(fr.stats.h * 1e3).substr(0, 6) + " mm, " +
                           std::to_string(fr.stats.seconds_total).substr(0, 5) + " s");
     cloud = std::move(fr.cloud);
-    if (c.fit_plane) plane_rms(cloud, "plane residual after");
+    if (region) {
+      const SlBoardMeasurement m =
+          board_report(sum, cloud.positions, *region, bo, c.capture, "filtered ");
+      if (!c.residual_map.empty()) {
+        write_sl_residual_map(c.residual_map + "_filtered.png", cloud.positions, m, *region,
+                              r.calibration, c.residual_range_m);
+        sum.add("residual map", c.residual_map + "_filtered.png");
+      }
+    } else if (c.fit_plane) {
+      plane_rms(sum, cloud, c.plane_band, "plane residual after");
+    }
 #else
     throw UnavailableError("sl decode --filter: this build has no filter module");
 #endif
@@ -206,9 +335,193 @@ int run_decode(const SlCommandOptions& c) {
 #endif
 }
 
+//! Relative difference in percent, as text.
+std::string pct(double ours, double theirs) {
+  char b[48];
+  std::snprintf(b, sizeof b, "%+.2f %%", 100.0 * (ours - theirs) / theirs);
+  return b;
+}
+
+void compare_calibrations(Summary& sum, const SlCalibration& ours, const SlCalibration& ref,
+                          int ref_step) {
+  char b[256];
+  const Intrinsics &a = ours.camera, &r = ref.camera;
+  std::snprintf(b, sizeof b, "fx %s, fy %s, cx %+.1f px, cy %+.1f px, k1 %+.3f, k2 %+.3f",
+                pct(a.fx, r.fx).c_str(), pct(a.fy, r.fy).c_str(), a.cx - r.cx, a.cy - r.cy,
+                a.dist[0] - r.dist[0], a.dist[1] - r.dist[1]);
+  sum.add("vs reference: camera", b);
+  // The reference's projector pixels are ref_step decoded pixels.
+  const Intrinsics &p = ours.projector, &q = ref.projector;
+  const double s = 1.0 / ref_step;
+  std::snprintf(b, sizeof b,
+                "fx %s, fy %s, cx %+.1f px, cy %+.1f px (reference / %d: Gray-code step %d)",
+                pct(p.fx, q.fx * s).c_str(), pct(p.fy, q.fy * s).c_str(), p.cx - q.cx * s,
+                p.cy - q.cy * s, ref_step, ref_step);
+  sum.add("vs reference: projector", b);
+  const Eigen::Vector3d t_ours = ours.T * ours.unit_m, t_ref = ref.T * ref.unit_m;
+  const Eigen::AngleAxisd dr(ours.R * ref.R.transpose());
+  std::snprintf(
+      b, sizeof b, "%.1f mm vs %.1f mm (%s), direction %.2f deg apart, rotation %.3f deg apart",
+      t_ours.norm() * 1e3, t_ref.norm() * 1e3, pct(t_ours.norm(), t_ref.norm()).c_str(),
+      std::acos(std::clamp(t_ours.normalized().dot(t_ref.normalized()), -1.0, 1.0)) * 180 / M_PI,
+      dr.angle() * 180 / M_PI);
+  sum.add("vs reference: baseline", b);
+}
+
+int run_calibrate(const SlCommandOptions& c) {
+  SlCalibrateOptions co;
+  co.board = chessboard_of(c);
+  co.corners.window_radius_px = c.corner_window;
+  co.estimate_k3 = c.estimate_k3;
+  co.zero_tangential = c.zero_tangential;
+  validate(co);
+  check_output("-o", c.output, {".yml", ".yaml"});
+  if (!c.kamino_xml.empty()) check_output("--kamino-xml", c.kamino_xml, {".xml"});
+  std::vector<std::filesystem::path> folders;
+  for (const auto& a : c.captures) {
+    const auto found = find_structured_light_captures(a);
+    if (found.empty())
+      throw InputError(a, "", "not a structured-light capture (capture.json or graycode_00.png)");
+    folders.insert(folders.end(), found.begin(), found.end());
+  }
+  if (static_cast<int>(folders.size()) < co.min_views)
+    throw OptionError("sl calibrate: " + std::to_string(folders.size()) + " capture(s) given, " +
+                      std::to_string(co.min_views) + " board poses needed");
+  int pw = 0, ph = 0;
+  if (!c.projector.empty()) std::tie(pw, ph) = parse_size(c.projector);
+  std::optional<SlCalibration> reference;
+  if (!c.compare.empty()) reference = read_sl_calibration(c.compare);
+  std::vector<SlCapture> captures;
+  std::vector<SlDecoded> decoded;
+  double decode_s = 0;
+  {
+    Progress bar("sl calibrate: load + decode", folders.size());
+    for (const auto& f : folders) {
+      const SlCaptureInfo info = describe_sl_capture(f, pw, ph);
+      captures.push_back(SlCapture::load(info));
+      SlDecodeOptions d;
+      d.white_threshold = c.white_threshold >= 0 ? c.white_threshold : info.white_threshold;
+      d.black_threshold = c.black_threshold >= 0 ? c.black_threshold : info.black_threshold;
+      d.sub_stripe = !c.integer;
+      d.sub_stripe_level = c.sub_stripe_level;
+      d.threads = c.threads;
+      decoded.push_back(decode_graycode(captures.back(), d));
+      decode_s += decoded.back().seconds;
+      bar.advance(1);
+    }
+  }
+  const SlCalibrateResult res = calibrate_sl(captures, decoded, co);
+  write_sl_calibration(c.output, res.calibration);
+  if (!c.kamino_xml.empty()) write_sl_calibration_kamino(c.kamino_xml, res.calibration);
+
+  Summary sum("scanclean sl calibrate");
+  sum.add("captures", std::to_string(folders.size()) + " (" +
+                          std::to_string(captures.front().width()) + "x" +
+                          std::to_string(captures.front().height()) + " camera, " +
+                          std::to_string(res.calibration.projector.width) + "x" +
+                          std::to_string(res.calibration.projector.height) + " projector)");
+  sum.add("board", c.board + " inner corners, squares " + mm(co.board.square_m, 1));
+  sum.add("decode", std::string(c.integer ? "integer" : "sub-stripe") + ", " +
+                        std::to_string(decode_s * 1e3 / folders.size()).substr(0, 6) +
+                        " ms per capture");
+  for (const auto& v : res.views) {
+    char b[200];
+    if (v.used)
+      std::snprintf(b, sizeof b, "%d corners, reprojection camera %.3f px, projector %.3f px",
+                    v.corners, v.camera_rms_px, v.projector_rms_px);
+    else
+      std::snprintf(b, sizeof b, "not used: %s", v.reason.c_str());
+    sum.add("view " + std::filesystem::path(v.name).filename().string(), b);
+  }
+  char b[256];
+  std::snprintf(b, sizeof b, "camera %.3f px, projector %.3f px, stereo %.3f px", res.camera_rms_px,
+                res.projector_rms_px, res.stereo_rms_px);
+  sum.add("reprojection RMS", b);
+  const auto& K = res.calibration.camera;
+  const auto& P = res.calibration.projector;
+  std::snprintf(b, sizeof b,
+                "fx %.1f fy %.1f cx %.1f cy %.1f; k1 %.4f k2 %.4f p1 %.5f p2 %.5f k3 %.4f", K.fx,
+                K.fy, K.cx, K.cy, K.dist[0], K.dist[1], K.dist[2], K.dist[3], K.dist[4]);
+  sum.add("camera", b);
+  std::snprintf(b, sizeof b,
+                "fx %.1f fy %.1f cx %.1f cy %.1f; k1 %.4f k2 %.4f p1 %.5f p2 %.5f k3 %.4f", P.fx,
+                P.fy, P.cx, P.cy, P.dist[0], P.dist[1], P.dist[2], P.dist[3], P.dist[4]);
+  sum.add("projector", b);
+  const Eigen::Vector3d t = res.calibration.T * 1e3;
+  std::snprintf(b, sizeof b, "T (%.1f, %.1f, %.1f) mm, |T| %.1f mm", t.x(), t.y(), t.z(), t.norm());
+  sum.add("camera -> projector", b);
+  if (reference) {
+    int step = reference->graycode_step;
+    if (reference->layout == "kamino410") {
+      SlCalibration ref = *reference;
+      ref.projector.width = captures.front().info().graycode.projector_width;
+      ref.projector.height = captures.front().info().graycode.projector_height;
+      step = estimate_graycode_step(decoded.front(), ref);
+    }
+    compare_calibrations(sum, res.calibration, *reference, step);
+  }
+  sum.add("written", c.output + (c.kamino_xml.empty() ? "" : ", " + c.kamino_xml));
+  sum.print();
+  return 0;
+}
+
+void add_sub_stripe_options(CLI::App* app, SlCommandOptions& c) {
+  app->add_flag("--integer", c.integer,
+                "Integer Gray-code decode (whole projector pixels) instead of the sub-stripe "
+                "decode (edges of the Gray-code stripes located where pattern and inverse "
+                "cross, projector coordinate interpolated between them)");
+  app->add_option("--sub-stripe-level", c.sub_stripe_level,
+                  "Finest Gray-code bit whose stripe edges are used (0 = every edge; raise it "
+                  "when the camera does not resolve the finest stripes)")
+      ->default_val(0);
+}
+
+void add_board_options(CLI::App* app, SlCommandOptions& c) {
+  app->add_option("--board", c.board, "Chessboard inner corners COLSxROWS")->default_val("9x7");
+  app->add_option("--square", c.square_m, "Chessboard square side, metres")->default_val(0.075);
+}
+
+CLI::App* add_calibrate_command(CLI::App& cmd, SlCommandOptions& c) {
+  auto* cal = cmd.add_subcommand(
+      "calibrate",
+      "Calibrate camera, projector and their pose from three or more captures of a chessboard "
+      "under the Gray-code sequence (corners in the camera by OpenCV, in the projector by local "
+      "homographies of the decoded pixels, Moreno & Taubin 2012); writes calib.yml (metres, "
+      "Gray-code step 1)");
+  cal->add_option("captures", c.captures,
+                  "Capture folders (or folders of captures), one board pose each")
+      ->required();
+  cal->add_option("-o,--output", c.output, "Output calib.yml")->required();
+  cal->add_option("--kamino-xml", c.kamino_xml,
+                  "Also write kamino410/procam-calibration's calibration_result.xml layout "
+                  "(translation in millimetres)");
+  cal->add_option("--compare", c.compare,
+                  "Reference calibration to report the differences to (e.g. the rig's "
+                  "calibration_result.xml)");
+  cal->add_option("--corner-window", c.corner_window,
+                  "Half side of the local homography window around each corner, camera pixels")
+      ->default_val(20);
+  cal->add_flag("--k3", c.estimate_k3,
+                "Also estimate the 6th-order radial distortion k3 (needs many, varied poses; "
+                "default k3 = 0)");
+  cal->add_flag("--zero-tangential", c.zero_tangential,
+                "Fix the tangential distortion p1 = p2 = 0");
+  cal->add_option("--projector", c.projector,
+                  "Projector size WxH (kamino410 captures without ../graycode_pattern/)");
+  cal->add_option("--black-threshold", c.black_threshold,
+                  "Shadow mask threshold (gray levels; default: the capture's, else 40)");
+  cal->add_option("--white-threshold", c.white_threshold,
+                  "Bit threshold (gray levels; default: the capture's, else 5)");
+  cal->add_option("--threads", c.threads, "Worker threads, 0 = all cores")->default_val(0);
+  add_sub_stripe_options(cal, c);
+  add_board_options(cal, c);
+  return cal;
+}
+
 const CommandRegistrar kRegistrar{{
     "sl",
-    "Structured light (Gray code): write projector patterns, decode captures to point clouds",
+    "Structured light (Gray code): write projector patterns, calibrate the rig, decode captures "
+    "to point clouds",
     40,
     [](CLI::App& cmd) {
       auto c = std::make_shared<SlCommandOptions>();
@@ -267,14 +580,33 @@ const CommandRegistrar kRegistrar{{
                       "projector pixels (epipolar check)")
           ->default_val(10.0);
       dec->add_flag("--fit-plane", c->fit_plane,
-                    "Report the RMS residual to a robust plane fit (flat targets)");
+                    "Find the chessboard (--board, --square) and report its plane residual "
+                    "(whole board and central window: RMS, 95th percentile; raw and, with "
+                    "--filter, filtered) and the square size measured from the triangulated "
+                    "corners; without a board, the residual to a plane over the whole scene");
       dec->add_option("--plane-band", c->plane_band,
                       "Inlier band half-width of the plane fit, metres")
           ->default_val(0.01);
       dec->add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
+      add_sub_stripe_options(dec, *c);
+      add_board_options(dec, *c);
+      dec->add_option("--window", c->window_m,
+                      "--fit-plane: side of the central board window, metres (along the board)")
+          ->default_val(0.30);
+      dec->add_option("--residual-map", c->residual_map,
+                      "--fit-plane: write PREFIX_raw.png (and PREFIX_filtered.png with --filter), "
+                      "the board's residual to its plane per camera pixel");
+      dec->add_option("--residual-range", c->residual_range_m,
+                      "Colour range of the residual maps, +- metres")
+          ->default_val(0.005);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
-      return [c, pat] { return pat->parsed() ? run_patterns(*c) : run_decode(*c); };
+      auto* cal = add_calibrate_command(cmd, *c);
+      return [c, pat, cal] {
+        if (pat->parsed()) return run_patterns(*c);
+        if (cal->parsed()) return run_calibrate(*c);
+        return run_decode(*c);
+      };
     },
 }};
 

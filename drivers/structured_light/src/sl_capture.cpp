@@ -78,6 +78,13 @@ SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
   const fs::path file = folder / "capture.json";
   nlohmann::json j;
   {
+    // A capture description is a few hundred bytes; refuse anything large before parsing.
+    std::error_code ec;
+    const auto size = fs::file_size(file, ec);
+    if (!ec && size > 65536)
+      throw InputError(
+          file.string(), "",
+          "larger than 65536 bytes (" + std::to_string(size) + "): not a capture description");
     std::ifstream in(file);
     if (!in) throw IoError(file.string() + ": cannot open");
     try {

@@ -73,6 +73,23 @@ struct SlTriangulator::Impl {
   std::vector<cv::Point2d> camera_rays;  // (x, y) of the ray (x, y, 1)
   std::vector<cv::Point2d> projector;    // normalised undistorted projector pixel coordinates
   int grid_w = 0, grid_h = 0;            // decoded Gray-code grid (projector size / step)
+
+  //! Bilinear interpolation of `projector` at continuous decoded coordinates (clamped to the
+  //! grid; NaN if a corner is NaN).
+  cv::Point2d projector_at(double c, double r) const {
+    c = std::clamp(c, 0.0, static_cast<double>(grid_w - 1));
+    r = std::clamp(r, 0.0, static_cast<double>(grid_h - 1));
+    const int c0 = std::min(static_cast<int>(c), std::max(0, grid_w - 2));
+    const int r0 = std::min(static_cast<int>(r), std::max(0, grid_h - 2));
+    const int c1 = std::min(c0 + 1, grid_w - 1), r1 = std::min(r0 + 1, grid_h - 1);
+    const double fc = c - c0, fr = r - r0;
+    auto at = [&](int cc, int rr) {
+      return projector[static_cast<std::size_t>(rr) * static_cast<std::size_t>(grid_w) +
+                       static_cast<std::size_t>(cc)];
+    };
+    const cv::Point2d a = at(c0, r0), b = at(c1, r0), e = at(c0, r1), f = at(c1, r1);
+    return (1 - fr) * ((1 - fc) * a + fc * b) + fr * ((1 - fc) * e + fc * f);
+  }
 };
 
 SlTriangulator::SlTriangulator(const SlCalibration& calibration) : impl_(std::make_unique<Impl>()) {
@@ -126,6 +143,7 @@ RangeFrame SlTriangulator::triangulate(const SlDecoded& d, const SlTriangulation
   const int pw = impl_->grid_w, ph = impl_->grid_h;
   const double pfx = c.projector.fx, pfy = c.projector.fy;
   const double max_res2 = o.max_reprojection_px * o.max_reprojection_px;
+  const bool sub = d.column_f.size() == d.column.size() && d.row_f.size() == d.row.size();
   const double zmin = o.min_depth_m, zmax = o.max_depth_m > 0 ? o.max_depth_m : 1e300;
 
   // Per-row counters, summed in order afterwards (deterministic for any thread count).
@@ -145,7 +163,9 @@ RangeFrame SlTriangulator::triangulate(const SlDecoded& d, const SlTriangulation
           ++n_dep[vs];
           continue;
         }
-        const cv::Point2d& pp = impl_->projector[static_cast<std::size_t>(row) * pw + col];
+        cv::Point2d pp = impl_->projector[static_cast<std::size_t>(row) * pw + col];
+        if (sub && !std::isnan(d.column_f.data[i]) && !std::isnan(d.row_f.data[i]))
+          pp = impl_->projector_at(d.column_f.data[i], d.row_f.data[i]);
         if (std::isnan(pp.x)) {
           ++n_dep[vs];
           continue;
@@ -196,6 +216,33 @@ RangeFrame SlTriangulator::triangulate(const SlDecoded& d, const SlTriangulation
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (stats_out) *stats_out = s;
   return f;
+}
+
+std::optional<Eigen::Vector3d> triangulate_sl_point(const SlCalibration& c,
+                                                    const Eigen::Vector2d& camera_px,
+                                                    const Eigen::Vector2d& projector_px,
+                                                    double* reprojection_px) {
+  const cv::TermCriteria crit(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-9);
+  std::vector<cv::Point2d> cam{{camera_px.x(), camera_px.y()}},
+      proj{{projector_px.x(), projector_px.y()}};
+  std::vector<cv::Point2d> cn, pn;
+  cv::undistortPoints(cam, cn, camera_matrix(c.camera), dist_coeffs(c.camera), cv::noArray(),
+                      cv::noArray(), crit);
+  cv::undistortPoints(proj, pn, camera_matrix(c.projector), dist_coeffs(c.projector), cv::noArray(),
+                      cv::noArray(), crit);
+  const Eigen::Vector3d rc(cn[0].x, cn[0].y, 1.0);
+  const Eigen::Vector3d Rr = c.R * rc;
+  const double a1 = Rr.x() - pn[0].x * Rr.z(), b1 = c.T.x() - pn[0].x * c.T.z();
+  const double a2 = Rr.y() - pn[0].y * Rr.z(), b2 = c.T.y() - pn[0].y * c.T.z();
+  const double den = a1 * a1 + a2 * a2;
+  if (!(den > 1e-12)) return std::nullopt;
+  const double lambda = -(a1 * b1 + a2 * b2) / den;
+  const Eigen::Vector3d Xp = lambda * Rr + c.T;
+  if (!(lambda > 0) || !(Xp.z() > 0)) return std::nullopt;
+  if (reprojection_px)
+    *reprojection_px = std::hypot((Xp.x() / Xp.z() - pn[0].x) * c.projector.fx,
+                                  (Xp.y() / Xp.z() - pn[0].y) * c.projector.fy);
+  return Eigen::Vector3d(lambda * c.unit_m * rc);
 }
 
 double sl_median_reprojection_px(const SlDecoded& d, const SlCalibration& c, int step,

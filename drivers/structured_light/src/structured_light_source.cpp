@@ -15,6 +15,8 @@ SlDecodeOptions decode_options(const SlOptions& o, const SlCaptureInfo& info) {
   d.black_threshold = o.black_threshold >= 0 ? o.black_threshold : info.black_threshold;
   d.decoder = o.decoder;
   d.threads = o.threads;
+  d.sub_stripe = o.sub_stripe;
+  d.sub_stripe_level = o.sub_stripe_level;
   return d;
 }
 
@@ -76,6 +78,7 @@ SlResult process(const fs::path& folder, const SlOptions& o, TriangulatorCache& 
                          std::to_string(r.calibration.camera.height) + " camera images");
   r.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.decoded = decode_graycode(capture, decode_options(o, r.info));
+  r.capture = capture;
   if (o.graycode_step == 0 && r.calibration.layout == "kamino410") {
     const int step =
         estimate_graycode_step(r.decoded, r.calibration, &r.step_median_reprojection_px);

@@ -96,11 +96,40 @@ std::vector<Eigen::Vector3d> rays_for(const SlCalibration& calib,
   return rays;
 }
 
-double albedo_at(const Eigen::Vector3d& p) {
+void board_axes(const SlScene& s, Eigen::Vector3d& ex, Eigen::Vector3d& ey) {
+  const Eigen::Vector3d n = s.plane_normal.normalized();
+  ex = (s.board_x_dir - s.board_x_dir.dot(n) * n).normalized();
+  ey = n.cross(ex).normalized();
+}
+
+double albedo_at(const SlScene& s, int surface, const Eigen::Vector3d& p) {
+  if (s.chessboard && surface == 0) {
+    Eigen::Vector3d ex, ey;
+    board_axes(s, ex, ey);
+    const double a = (p - s.plane_point).dot(ex) / s.square_mm;
+    const double b = (p - s.plane_point).dot(ey) / s.square_mm;
+    if (std::abs(a) > 0.5 * (s.board_cols + 1) || std::abs(b) > 0.5 * (s.board_rows + 1))
+      return 0.6;
+    // Inner corners at half-integer offsets when the count is odd, integer when even.
+    const double oa = 0.5 * (s.board_cols - 1), ob = 0.5 * (s.board_rows - 1);
+    const long i = static_cast<long>(std::floor(a + oa)), j = static_cast<long>(std::floor(b + ob));
+    return ((i + j) % 2 == 0) ? 0.9 : 0.35;
+  }
   return 0.55 + 0.3 * (0.5 + 0.5 * std::sin(p.x() / 7.0) * std::sin(p.y() / 9.0));
 }
 
 }  // namespace
+
+std::vector<Eigen::Vector3d> sl_board_corners_mm(const SlScene& s) {
+  Eigen::Vector3d ex, ey;
+  board_axes(s, ex, ey);
+  std::vector<Eigen::Vector3d> out;
+  for (int r = 0; r < s.board_rows; ++r)
+    for (int c = 0; c < s.board_cols; ++c)
+      out.push_back(s.plane_point + (c - 0.5 * (s.board_cols - 1)) * s.square_mm * ex +
+                    (r - 0.5 * (s.board_rows - 1)) * s.square_mm * ey);
+  return out;
+}
 
 SlCalibration make_sl_calibration() {
   SlCalibration c;
@@ -156,7 +185,7 @@ SlRendered render_sl_capture(const SlCalibration& calib, const SlScene& scene) {
   for (std::size_t i = 0; i < sub.size(); ++i) {
     const Hit hit = cast(calib, scene, rays[i]);
     if (hit.surface < 0) continue;
-    albedo[i] = static_cast<float>(albedo_at(hit.point));
+    albedo[i] = static_cast<float>(albedo_at(scene, hit.surface, hit.point));
     if (hit.lit) {
       pcol[i] = static_cast<int>(std::round(hit.proj.x()));
       prow[i] = static_cast<int>(std::round(hit.proj.y()));

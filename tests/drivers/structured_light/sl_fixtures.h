@@ -28,7 +28,18 @@ struct SlScene {
   double noise_sigma = 2.0;
   std::uint64_t seed = 7;
   int supersample = 2;  // per axis: pixel-area integration
+  // A printed chessboard on the plane instead of the smooth texture: (board_cols + 1) x
+  // (board_rows + 1) squares centred on plane_point, rows along board_x_dir (projected into the
+  // plane); albedo 0.9 / 0.35, 0.6 around the board.
+  bool chessboard = false;
+  int board_cols = 9, board_rows = 7;  // inner corners
+  double square_mm = 20;
+  Eigen::Vector3d board_x_dir{1, 0, 0};
 };
+
+//! Inner corners of the scene's chessboard (camera frame, mm), OpenCV order candidates: row-major
+//! from the corner at (-cols/2, -rows/2) squares.
+std::vector<Eigen::Vector3d> sl_board_corners_mm(const SlScene& scene);
 
 //! Per camera pixel truth (at the pixel centre).
 struct SlTruth {

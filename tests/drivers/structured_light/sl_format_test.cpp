@@ -183,6 +183,16 @@ TEST(SlFormatTest, InconsistentCountIsNamed) {
   expect_input_error([&] { describe_sl_capture(folder); }, {"capture.json", "invalid JSON"});
 }
 
+TEST(SlFormatTest, OversizedCaptureDescriptionIsRefused) {
+  const fs::path folder = write_small("sl_big_json");
+  {
+    std::ofstream out(folder / "capture.json", std::ios::binary | std::ios::trunc);
+    out << "{\"pad\": \"" << std::string(70000, 'x') << "\"}";
+  }
+  expect_input_error([&] { describe_sl_capture(folder); },
+                     {"capture.json", "larger than 65536 bytes"});
+}
+
 TEST(SlFormatTest, NoCalibrationIsNamed) {
   const fs::path folder = write_small("sl_nocalib");
   fs::remove(folder / "calib.yml");
@@ -219,6 +229,7 @@ TEST(SlFormatTest, HandMadePixelsDecodeAsSpecified) {
     o.decoder = decoder;
     o.white_threshold = 5;
     o.black_threshold = 150;
+    o.sub_stripe = false;  // the integer decode's rules (sub-stripe: SlSubStripeTest)
     const SlDecoded d = decode_graycode(cap, o);
     SCOPED_TRACE(to_string(decoder));
     // x=0: Gray 11 -> binary 10 = column 2, row 0.
@@ -243,6 +254,7 @@ TEST(SlFormatTest, HandMadePixelsDecodeAsSpecified) {
     o.decoder = decoder;
     o.white_threshold = 0;
     o.black_threshold = 150;
+    o.sub_stripe = false;  // the integer decode's rules (sub-stripe: SlSubStripeTest)
     const SlDecoded d = decode_graycode(cap, o);
     EXPECT_EQ(d.status(1, 0), 0) << to_string(decoder);
     EXPECT_EQ(d.column(1, 0), 0);

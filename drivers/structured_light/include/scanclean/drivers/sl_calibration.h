@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "scanclean/core/range_frame.h"
 
@@ -34,6 +35,14 @@ struct SlCalibration {
   std::filesystem::path file;  //!< where it was read from (empty if built in memory)
 };
 
+//! Parses calibration text (either layout; YAML or XML as cv::FileStorage writes them) from a
+//! byte buffer, with a strict reader of its own: OpenCV's FileStorage parser is not given
+//! untrusted bytes (it crashes, loops or allocates without bound on small malformed files).
+//! At most 1 MiB of printable ASCII; matrices up to 16x16 with rows x cols values; every number
+//! finite. `name` labels the errors (a file name). JSON is not read.
+//! \throw InputError naming `name`, the line and what was expected.
+SlCalibration parse_sl_calibration(std::string_view text, const std::string& name);
+
 //! Reads a calibration file (either layout, detected from the field names).
 //! \throw InputError naming the file and the missing or malformed field (a matrix of the wrong
 //! size, a non-positive focal length, a non-rotation R, an unknown unit); IoError if unreadable.
@@ -41,5 +50,11 @@ SlCalibration read_sl_calibration(const std::filesystem::path& file);
 
 //! Writes the project's calib.yml layout (atomically). \throw IoError.
 void write_sl_calibration(const std::filesystem::path& file, const SlCalibration& calibration);
+
+//! Writes kamino410/procam-calibration's calibration_result.xml layout (atomically): the
+//! translation in millimetres (that layout's assumed unit), img_shape [rows, cols].
+//! \throw IoError.
+void write_sl_calibration_kamino(const std::filesystem::path& file,
+                                 const SlCalibration& calibration);
 
 }  // namespace scanclean

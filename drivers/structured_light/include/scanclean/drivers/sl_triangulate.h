@@ -17,6 +17,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <optional>
 
 #include "scanclean/core/range_frame.h"
 #include "scanclean/drivers/sl_calibration.h"
@@ -69,6 +70,16 @@ class SlTriangulator {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+//! Triangulates one camera pixel with one projector pixel (both continuous, pixels of the
+//! calibrated images: a decoded coordinate times graycode_step), by the least-squares method
+//! above, with both distortions undone. Returns the camera-frame point in metres (calibration
+//! unit_m), or nothing when it lies behind a centre or the planes are ill-conditioned.
+//! \p reprojection_px receives the projector reprojection error.
+std::optional<Eigen::Vector3d> triangulate_sl_point(const SlCalibration& calibration,
+                                                    const Eigen::Vector2d& camera_px,
+                                                    const Eigen::Vector2d& projector_px,
+                                                    double* reprojection_px = nullptr);
 
 //! Median projector reprojection error (pixels) of the least-squares triangulation over up to
 //! `samples` valid decoded pixels (evenly strided, deterministic) when the decoded Gray-code

@@ -23,7 +23,9 @@ struct SlOptions {
   SlDecoder decoder = SlDecoder::kFast;
   int projector_width = 0;  //!< > 0 overrides / supplies the projector size
   int projector_height = 0;
-  int threads = 0;  //!< decoder threads, 0 = all cores
+  int threads = 0;           //!< decoder threads, 0 = all cores
+  bool sub_stripe = true;    //!< sub-stripe decoding (SlDecodeOptions::sub_stripe)
+  int sub_stripe_level = 0;  //!< SlDecodeOptions::sub_stripe_level
   //! > 0 overrides the calibration's graycode_step (see SlCalibration). 0: the calibration's;
   //! for kamino410 calibrations, which do not record it, estimated from the decoded pixels
   //! (estimate_graycode_step).
@@ -43,6 +45,7 @@ std::unique_ptr<RangeSource> make_structured_light_source(const std::filesystem:
 //! Everything about one capture, for the command and tests.
 struct SlResult {
   SlCaptureInfo info;
+  SlCapture capture;  //!< the loaded images (shared, cheap to copy)
   SlCalibration calibration;
   SlDecoded decoded;
   RangeFrame frame;
