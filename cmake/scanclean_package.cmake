@@ -29,7 +29,9 @@ foreach(m ${_sc_modules})
     set(_find "")
     set(_pc "")
     set(_flag "")
-    if(dep MATCHES "^scanclean::(.+)$" OR dep MATCHES "^scanclean_(.+)$")
+    if(dep MATCHES "^scanclean::(.+)$")
+      set(_pc "scanclean-${CMAKE_MATCH_1}")
+    elseif(dep MATCHES "^scanclean_(.+)$")
       set(_pc "scanclean-${CMAKE_MATCH_1}")
     elseif(dep MATCHES "^opencv_(.+)$")
       list(APPEND _sc_opencv_components ${CMAKE_MATCH_1})
@@ -178,32 +180,36 @@ set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME scanclean)
 set(CPACK_PACKAGE_VENDOR "scanclean")
 set(CPACK_PACKAGE_CONTACT "scanclean maintainers <scanclean@example.org>")
-set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "${PROJECT_DESCRIPTION}")
 set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
 set(CPACK_DEB_COMPONENT_INSTALL ON)
+set(CPACK_STRIP_FILES ON)
 set(CPACK_COMPONENTS_ALL runtime dev)
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 set(CPACK_DEBIAN_PACKAGE_SECTION science)
 set(CPACK_DEBIAN_PACKAGE_PRIORITY optional)
 set(CPACK_DEBIAN_RUNTIME_PACKAGE_NAME scanclean)
 set(CPACK_DEBIAN_RUNTIME_PACKAGE_SHLIBDEPS ON)
-# Not found by dpkg-shlibdeps: the drivers the program loads at run time (libopenni2-0), and the
-# Python module's interpreter (pybind11 modules are built for one Python minor version) and numpy.
+# Not found by dpkg-shlibdeps: the Python module's interpreter (pybind11 modules are built for one
+# Python minor version) and numpy. libopenni2-0 (with the PS1080/OniFile drivers the driver folder
+# links to) comes from dpkg-shlibdeps, as the program links libOpenNI2.so.0.
 set(_runtime_depends "")
-if(TARGET scanclean_vsensor)
-  list(APPEND _runtime_depends libopenni2-0)
-endif()
 if(TARGET scanclean_python)
   list(APPEND _runtime_depends "python3 (>= ${SCANCLEAN_PYTHON_VERSION})"
     "python3 (<< ${SCANCLEAN_PYTHON_NEXT})" python3-numpy)
 endif()
 string(REPLACE ";" ", " CPACK_DEBIAN_RUNTIME_PACKAGE_DEPENDS "${_runtime_depends}")
-set(CPACK_COMPONENT_RUNTIME_DESCRIPTION
-  "${PROJECT_DESCRIPTION}\n The scanclean program (robust point-cloud filter of Schall, Belyaev and\n Seidel 2005, OpenNI2 capture, recordings, structured light) and its Python module.")
+# Descriptions: the synopsis is PROJECT_DESCRIPTION (CPack prepends it); lines of at most 80.
+set(CPACK_COMPONENT_RUNTIME_DESCRIPTION "The scanclean program cleans scanner output with the robust filter of
+Schall, Belyaev and Seidel (2005): point-cloud files (PLY, PCD, XYZ,
+Stanford .conf), live OpenNI2 depth sensors, .oni files, recordings,
+depth images and Gray-code structured light. Includes the Python module
+(import scanclean).")
 set(CPACK_DEBIAN_DEV_PACKAGE_NAME scanclean-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
 set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS
   "scanclean (= ${PROJECT_VERSION}), libeigen3-dev, libnanoflann-dev, libtbb-dev, nlohmann-json3-dev, liblzf-dev, libopencv-dev, libopencv-contrib-dev, libopenni2-dev, libusb-1.0-0-dev, pkg-config")
-set(CPACK_COMPONENT_DEV_DESCRIPTION
-  "${PROJECT_DESCRIPTION} (development files)\n Headers, static libraries, CMake package config (find_package(scanclean)) and\n pkg-config files of the scanclean libraries.")
+set(CPACK_COMPONENT_DEV_DESCRIPTION "Development files of the scanclean libraries (robust filter, point-cloud
+I/O, recordings, range sources, capture pipeline): headers, static
+libraries, the CMake package config (find_package(scanclean)) and
+pkg-config files.")
 include(CPack)
