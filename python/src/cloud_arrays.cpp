@@ -214,9 +214,10 @@ void bind_cloud_io(py::module_& m) {
   m.def(
       "write",
       [](const std::string& path, const py::handle& cloud, bool ascii,
-         const std::string& pcd_encoding) {
+         const std::string& pcd_encoding, const std::string& provenance) {
         WriteOptions w;
         w.pcd_encoding = pcd_encoding;
+        w.provenance = provenance;
         if (ascii) w.ply_encoding = PlyEncoding::kAscii;
         validate(w);
         const PointCloud c = cloud_from_object(cloud);
@@ -224,10 +225,11 @@ void bind_cloud_io(py::module_& m) {
         write_point_cloud(path, c, w);
       },
       py::arg("path"), py::arg("cloud"), py::kw_only(), py::arg("ascii") = false,
-      py::arg("pcd_encoding") = "binary_compressed",
+      py::arg("pcd_encoding") = "binary_compressed", py::arg("provenance") = "",
       "Writes a cloud atomically, format by extension (.ply, .pcd, .xyz). cloud: a dict as read() "
       "or robust_filter() returns (nested dicts such as 'stats' are ignored) or an (N, 3) array of "
-      "points. ascii: ASCII PLY; pcd_encoding: ascii | binary | binary_compressed.");
+      "points. ascii: ASCII PLY; pcd_encoding: ascii | binary | binary_compressed; provenance: a "
+      "header comment of PLY and PCD files (e.g. how the cloud was made).");
 }
 
 }  // namespace scanclean::python

@@ -50,6 +50,11 @@ def test_write_read_round_trip_keeps_every_array(tmp_path):
         assert_same_clouds(cloud, back)
     scanclean.write(str(tmp_path / "a.ply"), cloud, ascii=True)
     assert_same_clouds(cloud, scanclean.read(str(tmp_path / "a.ply")))
+    scanclean.write(str(tmp_path / "p.pcd"), cloud, provenance="made by test\nDATA x")
+    head = (tmp_path / "p.pcd").read_bytes().split(b"\nDATA ")[0]
+    assert b"\n# made by test DATA x\n" in head and b"written by scanclean " + \
+        scanclean.__version__.encode() in head
+    assert_same_clouds(cloud, scanclean.read(str(tmp_path / "p.pcd")))
 
 
 def test_bad_input_raises_typed_errors(tmp_path):
