@@ -4,7 +4,8 @@
 
 #include <gtest/gtest.h>
 
-#include <regex>
+#include <algorithm>
+#include <cctype>
 #include <string>
 
 #include "io_test_util.h"
@@ -42,7 +43,12 @@ TEST_P(ProvenanceTest, VersionAlwaysProvenanceWhenGivenOnOneLine) {
   const auto plain = dir_ / ("plain" + suffix);
   write_point_cloud(plain, cloud, w);
   const std::string h0 = header_of(plain);
-  EXPECT_TRUE(std::regex_search(h0, std::regex("written by scanclean [0-9]+\\.[0-9]+\\.[0-9]+")))
+  // "written by scanclean <major>.<minor>.<patch>" (no std::regex: GCC 12 warns inside it).
+  const auto at = h0.find("written by scanclean ");
+  ASSERT_NE(at, std::string::npos) << h0;
+  const std::string version = h0.substr(at + 21, h0.find_first_of(" ;\n", at + 21) - (at + 21));
+  EXPECT_TRUE(!version.empty() && std::isdigit(static_cast<unsigned char>(version[0])) &&
+              std::count(version.begin(), version.end(), '.') == 2)
       << h0;
 
   // A newline and a fake header keyword inside the text must not break out of the comment.
