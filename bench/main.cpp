@@ -1,4 +1,4 @@
-// scanclean_bench: the evaluation protocol of docs ALGORITHM.md, scanclean's robust_filter side
+// scanclean_bench: the evaluation protocol of docs/ALGORITHM.md, scanclean's robust_filter side
 // by side with CGAL's smoothers, a PCA-plane baseline and classical outlier removal, plus speed,
 // memory and the real merged bunny scans. See bench/README.md.
 #include <tbb/global_control.h>
@@ -58,7 +58,7 @@ int run(int argc, char** argv) {
   using namespace scanclean;
   using namespace scanclean::bench;
   CLI::App app{
-      "scanclean_bench: the point-cloud denoising evaluation protocol (docs ALGORITHM.md) with "
+      "scanclean_bench: the point-cloud denoising evaluation protocol (docs/ALGORITHM.md) with "
       "scanclean's robust_filter beside CGAL jet/bilateral/WLOP, a PCA-plane projection and "
       "statistical outlier removal; speed and memory; the real merged Stanford bunny scans.\n"
       "Quality numbers are in unit-sphere units (shapes normalised to radius 1); CD and P2M are "

@@ -1,6 +1,6 @@
 #pragma once
 //! \file protocol.h
-//! The evaluation protocol of ALGORITHM.md: noisy inputs with known ground truth, and the
+//! The evaluation protocol of docs/ALGORITHM.md: noisy inputs with known ground truth, and the
 //! quality metrics (CD, P2M, point-to-surface statistics, coverage, outlier classification).
 
 #include <Eigen/Core>

@@ -1,6 +1,6 @@
 #pragma once
 //! \file shapes.h
-//! Ground-truth shapes of the evaluation protocol (ALGORITHM.md, "Evaluation protocol"): each is
+//! Ground-truth shapes of the protocol (docs/ALGORITHM.md, "Evaluation protocol"): each is
 //! normalised to the unit sphere (bounding-box centre at the origin, largest radius 1), can be
 //! sampled uniformly by area with a seeded generator and answers the exact unsigned distance of a
 //! point to its surface. Units: the normalised unit (the bounding sphere has radius 1).

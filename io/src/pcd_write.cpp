@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "file_bytes.h"
+#include "header_comment.h"
 #include "position_precision.h"
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
@@ -86,7 +87,7 @@ std::string ascii_value(const OutField& f, double v) {
 }  // namespace
 
 void write_pcd(const std::filesystem::path& path, const PointCloud& cloud,
-               const std::string& encoding) {
+               const std::string& encoding, const std::string& provenance) {
   if (encoding != "ascii" && encoding != "binary" && encoding != "binary_compressed")
     throw OptionError("pcd encoding '" + encoding +
                       "' is not valid; expected ascii, binary or binary_compressed");
@@ -142,8 +143,10 @@ void write_pcd(const std::filesystem::path& path, const PointCloud& cloud,
   for (const auto& a : cloud.attributes) fields.push_back(attribute_field(a));
 
   std::string header =
-      "# .PCD v0.7 - Point Cloud Data file format (written by scanclean; units: metres)\n"
-      "VERSION 0.7\nFIELDS";
+      "# .PCD v0.7 - Point Cloud Data file format (written by scanclean " SCANCLEAN_VERSION
+      "; units: metres)\n";
+  if (!provenance.empty()) header += "# " + io_detail::header_comment_text(provenance) + "\n";
+  header += "VERSION 0.7\nFIELDS";
   std::string sizes = "SIZE", types = "TYPE", counts = "COUNT";
   std::size_t step = 0;
   std::vector<std::size_t> offsets;

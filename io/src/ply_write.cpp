@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "file_bytes.h"
+#include "header_comment.h"
 #include "position_precision.h"
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/io/ply.h"
@@ -124,7 +125,8 @@ void put_value(std::string& buf, Out t, double v, bool ascii) {
 
 }  // namespace
 
-void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEncoding encoding) {
+void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEncoding encoding,
+               const std::string& provenance) {
   cloud.check_consistent();
   const bool ascii = encoding == PlyEncoding::kAscii;
   const std::size_t n = cloud.size();
@@ -156,7 +158,8 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
 
   std::string header = "ply\nformat ";
   header += ascii ? "ascii 1.0\n" : "binary_little_endian 1.0\n";
-  header += "comment written by scanclean (units: metres)\n";
+  header += "comment written by scanclean " SCANCLEAN_VERSION " (units: metres)\n";
+  if (!provenance.empty()) header += "comment " + io_detail::header_comment_text(provenance) + "\n";
   const bool grid = !cloud.grid.empty();
   if (grid) {
     header += "obj_info num_cols " + std::to_string(cloud.grid.cols) + "\n";

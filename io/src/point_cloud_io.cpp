@@ -43,8 +43,8 @@ void write_point_cloud(const std::filesystem::path& path, const PointCloud& clou
                        const WriteOptions& options) {
   validate(options);
   const std::string f = point_cloud_format(path);
-  if (f == "ply") return write_ply(path, cloud, options.ply_encoding);
-  if (f == "pcd") return write_pcd(path, cloud, options.pcd_encoding);
+  if (f == "ply") return write_ply(path, cloud, options.ply_encoding, options.provenance);
+  if (f == "pcd") return write_pcd(path, cloud, options.pcd_encoding, options.provenance);
   if (f == "xyz") return write_xyz(path, cloud);
   throw OptionError("output " + path.string() + ": unsupported file extension '" +
                     path.extension().string() + "'; expected .ply, .pcd, .xyz or .txt");

@@ -8,7 +8,7 @@ namespace scanclean {
 namespace {
 
 TEST(IntrinsicsTest, FromFovMatchesOpenNIConverter) {
-  // SENSORS.md §4: hfov 1.0226 rad gives fx = 570.34 at 640 px; principal point at the centre.
+  // docs/SENSORS.md §4: hfov 1.0226 rad gives fx = 570.34 at 640 px; principal point at the centre.
   Intrinsics k = Intrinsics::from_fov(640, 480, 1.0226, 0.7966);
   EXPECT_NEAR(k.fx, 570.34, 0.01);
   EXPECT_DOUBLE_EQ(k.cx, 320.0);

@@ -109,7 +109,7 @@ TEST(FrameToPointsTest, TiltedPlaneNormalsAreAccurate) {
     EXPECT_EQ(facing, n);
     const double mean = sum / n;
     std::printf("stencil %d: mean normal error %.3f deg over %zu points\n", s, mean, n);
-    // SENSORS.md §4 measured 0.79 deg at s = 3 and 1.20 deg at s = 2.
+    // docs/SENSORS.md §4 measured 0.79 deg at s = 3 and 1.20 deg at s = 2.
     EXPECT_LE(mean, s == 3 ? 1.5 : 2.5);
   }
 }

@@ -9,7 +9,7 @@ namespace {
 
 constexpr double kDeg = M_PI / 180.0;
 
-// Oracles: the values SENSORS.md §4 lists, computed from the published formulas.
+// Oracles: the values docs/SENSORS.md §4 lists, computed from the published formulas.
 TEST(NoiseModelTest, NguyenAxialSigmaMatchesPublishedTable) {
   EXPECT_NEAR(nguyen_axial_sigma_m(1.0, 0.0), 0.0019, 0.00005);
   EXPECT_NEAR(nguyen_axial_sigma_m(1.0, 40 * kDeg), 0.0019, 0.0001);

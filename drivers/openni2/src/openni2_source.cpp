@@ -1,4 +1,4 @@
-// OpenNI2 range source and .oni recorder (SENSORS.md §1-§3, §7-§8). One class for live sensors,
+// OpenNI2 range source, .oni recorder (docs/SENSORS.md §1-3, §7-8). One class for live sensors,
 // .oni files and the virtual sensor; everything goes through the real OpenNI2 C++ API.
 //
 // Debian OpenNI2 rules kept here: never PlaybackControl::seek (SIGSEGV in libOniFile), never
@@ -180,7 +180,7 @@ void OpenNI2Source::open_device(bool start) {
     kind_ = "openni2";
     device_uri = uri_.substr(10);
     // Debian's DummyDevice (URIs Dummy, Oz, PingPong) never joins its stream threads and
-    // crashes the process at exit (SENSORS.md §1): refuse it.
+    // crashes the process at exit (docs/SENSORS.md §1): refuse it.
     if (device_uri == "Dummy" || device_uri == "Oz" || device_uri == "PingPong")
       throw UnavailableError("OpenNI2's DummyDevice ('" + device_uri +
                              "') is not supported: it crashes at exit; use vsensor://pattern "
@@ -509,7 +509,7 @@ std::size_t record_oni(const std::string& device_uri, const std::filesystem::pat
   if (recorder.start() != openni::STATUS_OK)
     throw IoError(out_oni.string() + ": cannot start recording: " + extended_error());
   // Recorder::start() only posts a message to the recorder thread: give it time before frames
-  // arrive, or the first frames are dropped (SENSORS.md §3).
+  // arrive, or the first frames are dropped (docs/SENSORS.md §3).
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   source.start_stream();
 

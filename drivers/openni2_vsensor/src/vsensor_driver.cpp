@@ -1,4 +1,4 @@
-// scanclean's OpenNI2 virtual-sensor driver (SENSORS.md §3, §8): a recording folder (format v1)
+// OpenNI2 virtual-sensor driver (docs/SENSORS.md §3, §8): a recording folder (format v1)
 // or a generated pattern served as a depth camera through the real OpenNI2 driver protocol
 // (Debian's Driver/OniDriverAPI.h, 2.2.0.33). Loaded by libOpenNI2 from a driver folder as
 // libScancleanVirtualSensor.so.0; opened with Device::open("vsensor://...").
@@ -29,7 +29,7 @@
 #include <string>
 #include <thread>
 
-// Debian ships no XnLib headers; ONI_EXPORT_DRIVER needs these two macros (SENSORS.md §3).
+// Debian ships no XnLib headers; ONI_EXPORT_DRIVER needs these two macros (docs/SENSORS.md §3).
 #define XN_NEW(T, ...) new (std::nothrow) T(__VA_ARGS__)
 #define XN_DELETE(p) delete (p)
 #include <Driver/OniDriverAPI.h>

@@ -27,7 +27,7 @@ struct Intrinsics {
   static Intrinsics from_fov(int width, int height, double hfov_rad, double vfov_rad);
 };
 
-//! Nominal PrimeSense PS1080 constants (SENSORS.md §4), used by the quantisation noise model.
+//! Nominal PrimeSense PS1080 constants (docs/SENSORS.md §4), used by the quantisation noise model.
 struct Ps1080Params {
   double zpd_mm = 0;       //!< zero-plane distance
   double zpps_mm = 0;      //!< zero-plane pixel size

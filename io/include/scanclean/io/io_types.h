@@ -26,6 +26,9 @@ enum class PlyEncoding { kBinaryLittleEndian, kAscii };
 struct WriteOptions {
   PlyEncoding ply_encoding = PlyEncoding::kBinaryLittleEndian;
   std::string pcd_encoding = "binary_compressed";  //!< ascii | binary | binary_compressed
+  //! Provenance written as a header comment of PLY and PCD files (after the scanclean version),
+  //! e.g. the command line; control characters become spaces; empty = none.
+  std::string provenance;
 };
 
 //! Throws OptionError naming the option when pcd_encoding is not one of the three values.

@@ -33,9 +33,11 @@ namespace scanclean {
 //! \throw InputError (malformed file), IoError (cannot read).
 PointCloud read_pcd(const std::filesystem::path& path, ReadReport* report = nullptr);
 
-//! encoding: "ascii", "binary" or "binary_compressed". \throw OptionError (unknown encoding),
-//! IoError.
+//! encoding: "ascii", "binary" or "binary_compressed". The `#` header comments name the scanclean
+//! version and, when given, the provenance text (WriteOptions::provenance). \throw OptionError
+//! (unknown encoding), IoError.
 void write_pcd(const std::filesystem::path& path, const PointCloud& cloud,
-               const std::string& encoding = "binary_compressed");
+               const std::string& encoding = "binary_compressed",
+               const std::string& provenance = {});
 
 }  // namespace scanclean

@@ -26,7 +26,8 @@
 //! intensity (float), red green blue alpha (uchar), every Attribute with its type (kUInt8 uchar,
 //! kInt32 int, kUInt32 uint, kFloat32 float, kFloat64 double), and, for organized clouds, a
 //! range_grid element plus obj_info num_cols / num_rows. PLY carries no unit (metres by
-//! convention here).
+//! convention here). The header comments name the scanclean version and, when given, the
+//! provenance text (WriteOptions::provenance, e.g. the command line).
 
 #include <filesystem>
 
@@ -41,6 +42,7 @@ PointCloud read_ply(const std::filesystem::path& path, ReadReport* report = null
 //! Writes a PLY point cloud atomically. \throw IoError; std::logic_error if the cloud is
 //! inconsistent (PointCloud::check_consistent).
 void write_ply(const std::filesystem::path& path, const PointCloud& cloud,
-               PlyEncoding encoding = PlyEncoding::kBinaryLittleEndian);
+               PlyEncoding encoding = PlyEncoding::kBinaryLittleEndian,
+               const std::string& provenance = {});
 
 }  // namespace scanclean

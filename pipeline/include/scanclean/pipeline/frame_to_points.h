@@ -1,7 +1,7 @@
 #pragma once
 //! \file frame_to_points.h
 //! One range frame to an organized point cloud with sensor normals and confidence weights
-//! (SENSORS.md §4). Camera frame (OpenCV: x right, y down, z forward), metres.
+//! (docs/SENSORS.md §4). Camera frame (OpenCV: x right, y down, z forward), metres.
 
 #include <Eigen/Core>
 #include <cstddef>

@@ -1,6 +1,6 @@
 #pragma once
 //! \file noise_model.h
-//! Depth noise of PrimeSense-class (structured-light, PS1080) sensors, SENSORS.md §4, and the
+//! Depth noise of PrimeSense-class (structured-light, PS1080) sensors, docs/SENSORS.md §4, and the
 //! per-point confidence weights derived from it. Units: metres and radians.
 
 #include <optional>

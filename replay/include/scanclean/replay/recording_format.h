@@ -1,6 +1,6 @@
 #pragma once
 //! \file recording_format.h
-//! Recording folder format v1 ("scanclean-rec/1", SENSORS.md §8, recordings/README.md): the
+//! Recording folder format v1 ("scanclean-rec/1", docs/SENSORS.md §8, recordings/README.md): the
 //! session metadata (session.json) and its JSON encoding. No JSON types appear here; the
 //! encoding lives in recording_format.cpp.
 

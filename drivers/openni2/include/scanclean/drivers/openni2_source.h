@@ -6,8 +6,8 @@
 //!
 //! Driver folder: OpenNI2 loads its drivers from <folder of libOpenNI2.so.0>/OpenNI2/Drivers.
 //! Build-tree programs and tests use <build>/oni (virtual sensor + .oni player); live rigs run
-//! with LD_LIBRARY_PATH=<build>/oni-live (adds PS1080/PSLink); an installed program uses the
-//! system folder (SENSORS.md §1, drivers/openni2_vsensor/CMakeLists.txt).
+//! with LD_LIBRARY_PATH=<build>/oni-live (adds PS1080/PSLink); an installed program uses
+//! <prefix>/lib/scanclean/oni, PS1080/PSLink included (docs/SENSORS.md §1, §3; cmake/).
 //!
 //! OpenNI::initialize() is called once per process through a reference-counted context: the
 //! first open source initializes OpenNI2, the last closed one shuts it down.

@@ -1,6 +1,6 @@
 #pragma once
 //! \file sl_calibration.h
-//! Camera-projector calibration of a structured-light rig (SENSORS.md §5, §8).
+//! Camera-projector calibration of a structured-light rig (docs/SENSORS.md §5, §8).
 //! Two file layouts are read, detected by content:
 //!  - the project's calib.yml (cv::FileStorage YAML/XML): cam_K, cam_dist, proj_K, proj_dist,
 //!    R, T, cam_size [w, h], proj_size [w, h], units ("mm" or "m"), rms;

@@ -1,7 +1,7 @@
 #pragma once
 //! \file sl_decode.h
 //! Gray-code decoding: per camera pixel the projector column and row, a validity status and a
-//! confidence (SENSORS.md §5).
+//! confidence (docs/SENSORS.md §5).
 //!
 //! A pixel is valid when
 //!  - it is lit: white - black > black_threshold (the shadow mask of OpenCV's decode(), signed),

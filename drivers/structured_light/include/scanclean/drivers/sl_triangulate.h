@@ -1,6 +1,6 @@
 #pragma once
 //! \file sl_triangulate.h
-//! Camera-projector triangulation of decoded Gray-code pixels (SENSORS.md §5).
+//! Camera-projector triangulation of decoded Gray-code pixels (docs/SENSORS.md §5).
 //!
 //! Method: the camera ray of each pixel r_c = undistort(u, v) (cv::undistortPoints, exact camera
 //! distortion) is taken as exact, the decoded projector pixel (column, row) is undistorted with

@@ -1,6 +1,6 @@
 #pragma once
 //! \file usb_probe.h
-//! USB pre-flight checks for depth sensors with libusb-1.0 (SENSORS.md §6): enumeration, the
+//! USB pre-flight checks for depth sensors with libusb-1.0 (docs/SENSORS.md §6): enumeration, the
 //! known-sensor table, permission diagnosis and hotplug events with a polling fallback. Backs
 //! `scanclean devices`. No libusb types appear here.
 
