@@ -15,6 +15,7 @@
 #include "scanclean/core/progress.h"
 #include "scanclean/filter/robust_filter.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/mesh_handoff.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -47,6 +48,7 @@ struct FilterCommandOptions {
   bool no_confidences = false;
   bool ascii = false;
   bool skip_missing = false;
+  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
 void print_warnings(const std::string& file, const ReadReport& report) {
@@ -59,6 +61,7 @@ void print_warnings(const std::string& file, const ReadReport& report) {
 int run_filter(const FilterCommandOptions& c) {
   if (c.inputs.empty() && c.conf.empty())
     throw OptionError("filter: give at least one input file or --conf FILE");
+  check_mesh_output(*c.mesh, "filter");
   PointCloud cloud;
   std::size_t files = 0;
   for (const auto& in : c.inputs) {
@@ -186,6 +189,7 @@ int run_filter(const FilterCommandOptions& c) {
                                          s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
+  run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
   return 0;
 }
@@ -287,6 +291,7 @@ const CommandRegistrar kRegistrar{{
                      "Worker threads, 0 = all cores (the result is identical for any value)")
           ->default_val(0);
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
+      c->mesh = add_mesh_option(cmd);
       return [c] { return run_filter(*c); };
     },
 }};

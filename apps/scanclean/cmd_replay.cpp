@@ -21,6 +21,7 @@
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/filter/robust_filter.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/mesh_handoff.h"
 #include "scanclean/pipeline/pipeline.h"
 #include "scanclean/summary.h"
 
@@ -333,6 +334,7 @@ struct ReplayCommandOptions {
   std::string depth_format = "auto";
   double fx = 0, fy = 0, cx = -1, cy = -1;
   bool paced = false;
+  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
 int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineOptions&)>& apply) {
@@ -353,8 +355,10 @@ int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineO
     K.source = "calibration";
     so.K = K;
   }
+  check_mesh_output(*c.mesh, "replay");
   auto source = make_range_source(c.source, so);
-  return run_clean_job("replay", *source, o, c.output, c.outliers);
+  const int rc = run_clean_job("replay", *source, o, c.output, c.outliers);
+  return mesh_written_output(*c.mesh, c.output, "replay", rc);
 }
 
 const CommandRegistrar kRegistrar{{
@@ -385,6 +389,7 @@ const CommandRegistrar kRegistrar{{
                    "Recording folders: reproduce the recorded frame timing (default: as fast as "
                    "possible)");
       auto apply = add_clean_options(cmd);
+      c->mesh = add_mesh_option(cmd);
       return [c, apply] { return run_replay(*c, apply); };
     },
 }};

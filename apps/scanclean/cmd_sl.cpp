@@ -16,6 +16,7 @@
 #include "scanclean/core/progress.h"
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
+#include "scanclean/mesh_handoff.h"
 #include "scanclean/summary.h"
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -50,6 +51,7 @@ struct SlCommandOptions {
   double plane_band = 0.01;
   bool ascii = false;
   int threads = 0;
+  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
 std::pair<int, int> parse_size(const std::string& s) {
@@ -118,6 +120,7 @@ int run_decode(const SlCommandOptions& c) {
   validate(o);
   if (!(c.plane_band > 0)) throw OptionError("--plane-band: expected > 0 metres");
   if (c.filter_h < 0) throw OptionError("--filter-h: expected > 0 metres (or 0 = automatic)");
+  check_mesh_output(*c.mesh, "sl decode");
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
     throw InputError(c.capture, "",
@@ -217,6 +220,7 @@ int run_decode(const SlCommandOptions& c) {
   }
   write_point_cloud(c.output, cloud, w);
   sum.add("output file", c.output + " (metres, camera frame)");
+  run_mesh_handoff(*c.mesh, cloud, 0.0, sum);
   sum.print();
   return 0;
 #endif
@@ -284,6 +288,7 @@ const CommandRegistrar kRegistrar{{
                       "Inlier band half-width of the plane fit, metres")
           ->default_val(0.01);
       dec->add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
+      c->mesh = add_mesh_option(*dec);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
       return [c, pat] { return pat->parsed() ? run_patterns(*c) : run_decode(*c); };
