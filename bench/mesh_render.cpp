@@ -72,10 +72,12 @@ void draw_panel(const TriangleMesh& mesh, const RenderView& view, const Eigen::V
 
 void render_meshes_png(const std::vector<RenderPanel>& panels, const RenderView& view,
                        const std::filesystem::path& png) {
-  if (panels.empty() || !panels.front().mesh) return;
+  if (panels.empty()) return;
+  const std::size_t frame = std::min(view.frame_panel, panels.size() - 1);
+  if (!panels[frame].mesh) return;
   const int size = view.panel_size;
   Eigen::AlignedBox3d box;
-  for (const auto& v : panels.front().mesh->vertices) box.extend(view.rotation * v);
+  for (const auto& v : panels[frame].mesh->vertices) box.extend(view.rotation * v);
   const Eigen::Vector3d centre = view.rotation.transpose() * box.center();
   const Eigen::Vector3d extent = box.sizes();
   const double scale = 0.9 * size / std::max({extent.x(), extent.y(), 1e-12});

@@ -23,10 +23,12 @@ struct RenderView {
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
   Eigen::Vector3d light = Eigen::Vector3d(0.3, 0.5, 1.0);  //!< towards the light, camera frame
   int panel_size = 640;                                    //!< pixels, square panels
+  //! The panel whose bounding box sets the common scale and centre.
+  std::size_t frame_panel = 0;
 };
 
 //! Renders the panels left to right into one image and writes it (PNG, atomically). All panels
-//! share the scale and centre of the first panel's bounding box. \throw IoError.
+//! share the scale and centre of the frame panel's bounding box. \throw IoError.
 void render_meshes_png(const std::vector<RenderPanel>& panels, const RenderView& view,
                        const std::filesystem::path& png);
 

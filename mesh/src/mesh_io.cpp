@@ -129,18 +129,36 @@ std::optional<double> recorded_kernel_size(const std::filesystem::path& cloud_fi
     std::string kw;
     words >> kw;
     if (kw != "comment" && kw != "obj_info") continue;
-    std::string token;
-    while (words >> token) {
-      const auto eq = token.find('=');
-      if (eq == std::string::npos) continue;
-      const std::string key = lower(token.substr(0, eq));
+    std::vector<std::string> tokens;
+    for (std::string token; words >> token;) tokens.push_back(token);
+    for (std::size_t i = 0; i < tokens.size(); ++i) {
+      // "h=0.0027", "h=2.7mm", "h: 0.0027 m", "filter_h 2.7 mm"
+      std::string key = tokens[i], value;
+      const auto sep = key.find_first_of("=:");
+      std::size_t next = i + 1;
+      if (sep != std::string::npos) {
+        value = key.substr(sep + 1);
+        key = key.substr(0, sep);
+      }
+      key = lower(key);
       if (key != "h" && key != "filter_h") continue;
-      std::string value = token.substr(eq + 1);
+      if (value.empty() && next < tokens.size()) value = tokens[next++];
       while (!value.empty() && (value.back() == ',' || value.back() == ';')) value.pop_back();
-      if (!value.empty() && value.back() == 'm') value.pop_back();
       char* end = nullptr;
-      const double h = std::strtod(value.c_str(), &end);
-      if (end && *end == '\0' && !value.empty() && std::isfinite(h) && h > 0) return h;
+      double h = std::strtod(value.c_str(), &end);
+      if (value.empty() || end == value.c_str()) continue;
+      std::string unit = end;
+      if (unit.empty() && next < tokens.size()) {
+        std::string t = tokens[next];
+        while (!t.empty() && (t.back() == ',' || t.back() == ';')) t.pop_back();
+        if (t == "m" || t == "mm") unit = t;
+      }
+      while (!unit.empty() && (unit.back() == ',' || unit.back() == ';')) unit.pop_back();
+      if (unit == "mm")
+        h *= 1e-3;
+      else if (!unit.empty() && unit != "m")
+        continue;
+      if (std::isfinite(h) && h > 0) return h;
     }
   }
   return std::nullopt;

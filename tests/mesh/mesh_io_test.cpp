@@ -75,6 +75,14 @@ TEST(MeshIoTest, RecordedKernelSizeIsReadFromTheHeaderOnly) {
   EXPECT_FALSE(recorded_kernel_size(write("c.ply",
                                           "ply\nformat ascii 1.0\ncomment hh=3 h=x\nelement "
                                           "vertex 0\nend_header\ncomment h=1\n")));
+  EXPECT_DOUBLE_EQ(*recorded_kernel_size(write("e.ply",
+                                               "ply\nformat ascii 1.0\ncomment scanclean filter "
+                                               "h 2.5 mm, noise 0.1 mm\nelement vertex 0\n"
+                                               "end_header\n")),
+                   0.0025);
+  EXPECT_FALSE(recorded_kernel_size(write("f.ply",
+                                          "ply\nformat ascii 1.0\ncomment h=3furlongs\n"
+                                          "element vertex 0\nend_header\n")));
   EXPECT_FALSE(recorded_kernel_size(write("d.xyz", "comment h=1\n")));
   EXPECT_FALSE(recorded_kernel_size(dir / "none.ply"));
 }

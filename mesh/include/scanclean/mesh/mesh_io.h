@@ -33,7 +33,8 @@ void write_mesh_ply(const std::filesystem::path& path, const TriangleMesh& mesh,
 bool is_mesh_output_path(const std::filesystem::path& path);
 
 //! The filter's kernel size h recorded in a PLY header, if any: a `comment` or `obj_info` line
-//! holding a token `h=<metres>` or `filter_h=<metres>` (an optional trailing "m" is accepted).
+//! holding `h` or `filter_h` followed by `=`, `:` or a space and a number, in metres unless
+//! followed by "mm" (e.g. "h=0.0027", "h=2.7mm", "filter_h: 0.0027 m", "h 2.7 mm").
 //! Returns nothing for other formats, unreadable files or no such token.
 std::optional<double> recorded_kernel_size(const std::filesystem::path& cloud_file);
 
