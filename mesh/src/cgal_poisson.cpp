@@ -3,11 +3,13 @@
 #include <CGAL/IO/facets_in_complex_2_to_triangle_mesh.h>
 #include <CGAL/Implicit_surface_3.h>
 #include <CGAL/Poisson_reconstruction_function.h>
+#include <CGAL/Random.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_default_triangulation_3.h>
 #include <CGAL/make_surface_mesh.h>
 #include <CGAL/property_map.h>
 
+#include <algorithm>
 #include <utility>
 
 #include "cgal_reconstruction.h"
@@ -27,6 +29,9 @@ TriangleMesh poisson(const std::vector<Eigen::Vector3d>& points,
   using C2t3 = CGAL::Surface_mesh_complex_2_in_triangulation_3<Tr>;
   using Surface = CGAL::Implicit_surface_3<Kernel, Function>;
 
+  // The surface mesher draws its initial points from CGAL's default random generator, which
+  // is seeded from the clock: seed it so that the same input gives the same mesh.
+  CGAL::get_default_random() = CGAL::Random(0);
   std::vector<PointWithNormal> pwn;
   pwn.reserve(points.size());
   for (std::size_t i = 0; i < points.size(); ++i)
@@ -67,6 +72,11 @@ TriangleMesh poisson(const std::vector<Eigen::Vector3d>& points,
     }
     if (k == 3) out.triangles.push_back(t);
   }
+  // CGAL lists the facets in an order that follows memory addresses: put them in a canonical
+  // order (each rotated to start at its smallest index, orientation kept; then sorted).
+  for (auto& t : out.triangles)
+    std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+  std::sort(out.triangles.begin(), out.triangles.end());
   return out;
 }
 

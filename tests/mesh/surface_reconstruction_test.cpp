@@ -101,6 +101,17 @@ TEST(SurfaceReconstructionTest, PoissonMakesAWatertightSphereNearTheTrueOne) {
   EXPECT_LT(worst, 0.03);
 }
 
+TEST(SurfaceReconstructionTest, PoissonIsDeterministic) {
+  const PointCloud sphere = test::noisy_sphere(2000, 1.0, 0.005, 29);
+  MeshOptions o;
+  o.method = MeshMethod::kPoisson;
+  const MeshResult a = reconstruct_surface(sphere, o);
+  const MeshResult b = reconstruct_surface(sphere, o);
+  ASSERT_EQ(a.mesh.vertices.size(), b.mesh.vertices.size());
+  EXPECT_EQ(a.mesh.vertices, b.mesh.vertices);
+  EXPECT_EQ(a.mesh.triangles, b.mesh.triangles);
+}
+
 TEST(SurfaceReconstructionTest, PoissonReorientsScrambledNormals) {
   PointCloud sphere = test::noisy_sphere(3000, 1.0, 0.0, 13);
   std::mt19937 rng(5);

@@ -85,7 +85,7 @@ struct MeshResult {
 //! filter's are consistent when the input had sensor normals). \throw OptionError (validate),
 //! InputError when the cloud has fewer than kMinMeshPoints points, non-finite coordinates, no
 //! normals (kPoisson) or zero normals, or when the reconstruction produces no triangle (e.g. all
-//! points coplanar for kAdvancingFront). Deterministic.
+//! points collinear for kAdvancingFront). Deterministic (CGAL's random generator is seeded).
 MeshResult reconstruct_surface(const PointCloud& cloud, const MeshOptions& options = {});
 
 //! Average distance to the k nearest neighbours, averaged over the points
