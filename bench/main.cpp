@@ -78,7 +78,7 @@ int run(int argc, char** argv) {
       "small smoke run (under a minute): the sphere only, 10k points, sigma 0.02, no WLOP; "
       "5 % uniform outliers; speed of robust_filter, PCA and SOR at 100k; real data");
   app.add_option("--suite", suite, "which sections to run")
-      ->check(CLI::IsMember({"quality", "outliers", "speed", "real", "all"}))
+      ->check(CLI::IsMember({"quality", "outliers", "speed", "real", "mesh", "all"}))
       ->capture_default_str();
   app.add_option("--threads", threads, "worker threads for every method (0 = all cores)")
       ->check(CLI::Range(0, 1024))
@@ -113,6 +113,8 @@ int run(int argc, char** argv) {
   app.add_flag("--filter-only", filter_only,
                "quality suite: run robust_filter alone, without the peers (for quick experiments; "
                "no target check)");
+  std::string pictures;
+  app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
   app.add_option("--speed-n", speed_n, "internal: points of the speed measurement")->group("");
   try {
@@ -139,6 +141,7 @@ int run(int argc, char** argv) {
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;
+  ctx.pictures_dir = pictures;
 
   const MachineInfo mi = machine_info();
   std::ostringstream head;
@@ -160,6 +163,7 @@ int run(int argc, char** argv) {
   if (suite == "outliers" || suite == "all") run_outlier_suite(ctx);
   if (suite == "speed" || suite == "all") run_speed_suite(ctx);
   if (suite == "real" || suite == "all") run_real_suite(ctx);
+  if (suite == "mesh" || suite == "all") run_mesh_suite(ctx);
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
   std::ostringstream summary;

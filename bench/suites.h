@@ -24,6 +24,8 @@ struct Context {
   std::vector<std::size_t> sizes;    //!< quality suite: only these N (empty = the protocol's)
   std::vector<double> sigmas;        //!< quality suite: only these noise levels (empty = all)
   bool filter_only = false;          //!< quality suite: robust_filter alone (no peers)
+  //! mesh suite: write its PNG pictures into this folder (empty: none)
+  std::filesystem::path pictures_dir;
   std::vector<Table> tables;
   std::vector<std::string> messages;  //!< skipped parts and other remarks for the report
   void add(Table t);
@@ -50,6 +52,7 @@ void run_quality_suite(Context& ctx);
 void run_outlier_suite(Context& ctx);
 void run_speed_suite(Context& ctx);
 void run_real_suite(Context& ctx);
+void run_mesh_suite(Context& ctx);
 
 //! --self-test: checks of the harness against oracles; returns the exit code (0 = all passed).
 int self_test_main(std::uint64_t seed);

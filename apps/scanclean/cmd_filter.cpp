@@ -17,6 +17,7 @@
 #include "scanclean/filter_options_cli.h"
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/mesh_handoff.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -30,6 +31,7 @@ struct FilterCommandOptions {
   bool ascii = false;
   bool skip_missing = false;
   std::string xyz_columns;
+  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
 void print_warnings(const std::string& file, const ReadReport& report) {
@@ -57,7 +59,8 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   for (const auto& in : c.inputs) inputs.push_back({"input", in});
   if (!c.conf.empty()) inputs.push_back({"--conf", c.conf});
   check_input_files("filter", inputs);
-  check_output_files("filter", inputs, {{"-o", c.output}, {"--outliers", c.outliers}});
+  check_output_files("filter", inputs,
+                     {{"-o", c.output}, {"--outliers", c.outliers}, {"--mesh", c.mesh->path}});
   FilterOptions o = to_filter_options(values);
   validate(o);
   WriteOptions w;
@@ -67,6 +70,8 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   }
   XyzOptions xyz;
   if (!c.xyz_columns.empty()) xyz.columns = parse_xyz_columns(c.xyz_columns);
+
+  check_mesh_output(*c.mesh, "filter");
 
   PointCloud cloud;
   std::size_t files = 0;
@@ -151,6 +156,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
                                          s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
+  run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
   if (collapsed) {
     std::fprintf(stderr,
@@ -187,6 +193,7 @@ const CommandRegistrar kRegistrar{{
                      "x,y,z,nx,ny,nz or x,y,z,i (names: x y z nx ny nz r g b i, '-' = skip); "
                      "default: guessed from the first line (see scanclean info)");
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
+      c->mesh = add_mesh_option(cmd);
       auto values = add_filter_options(cmd);
       return [c, values] { return run_filter(*c, *values); };
     },

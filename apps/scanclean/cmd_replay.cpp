@@ -13,6 +13,7 @@
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/drivers/make_range_source.h"
+#include "scanclean/mesh_handoff.h"
 #include "scanclean/pipeline/pipeline.h"
 
 namespace scanclean::app {
@@ -26,6 +27,7 @@ struct ReplayCommandOptions {
   std::string frames;
   std::string depth_format = "auto";
   bool paced = false;
+  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
 int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineOptions&)>& apply,
@@ -38,8 +40,10 @@ int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineO
   so.recorded_pacing = c.paced;
   intrinsics(c.source, so);
   check_clean_outputs("replay", o, c.source, c.output, c.outliers);
+  check_mesh_output(*c.mesh, "replay");
   auto source = make_range_source(c.source, so);
-  return run_clean_job("replay", *source, o, c.output, c.outliers);
+  const int rc = run_clean_job("replay", *source, o, c.output, c.outliers);
+  return mesh_written_output(*c.mesh, c.output, "replay", rc);
 }
 
 const CommandRegistrar kRegistrar{{
@@ -67,6 +71,7 @@ const CommandRegistrar kRegistrar{{
                    "Recording folders: reproduce the recorded frame timing (default: as fast as "
                    "possible)");
       auto apply = add_clean_options(cmd);
+      c->mesh = add_mesh_option(cmd);
       return [c, apply, intrinsics] { return run_replay(*c, apply, intrinsics); };
     },
 }};

@@ -21,6 +21,7 @@
 #include "scanclean/drivers/sl_calibrate.h"
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
+#include "scanclean/mesh_handoff.h"
 #include "scanclean/summary.h"
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -72,6 +73,7 @@ struct SlCommandOptions {
   int corner_window = 20;
   bool estimate_k3 = false;
   bool zero_tangential = false;
+  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
 //! The parent folder of an output must exist and the extension be one of `exts`.
@@ -213,6 +215,7 @@ int run_decode(const SlCommandOptions& c) {
     check_output("--residual-map", c.residual_map + "_raw.png", {".png"});
   }
   check_output("-o", c.output, {".ply", ".pcd", ".xyz"});
+  check_mesh_output(*c.mesh, "sl decode");
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
     throw InputError(c.capture, "",
@@ -330,6 +333,7 @@ int run_decode(const SlCommandOptions& c) {
   }
   write_point_cloud(c.output, cloud, w);
   sum.add("output file", c.output + " (metres, camera frame)");
+  run_mesh_handoff(*c.mesh, cloud, 0.0, sum);
   sum.print();
   return 0;
 #endif
@@ -599,6 +603,7 @@ const CommandRegistrar kRegistrar{{
       dec->add_option("--residual-range", c->residual_range_m,
                       "Colour range of the residual maps, +- metres")
           ->default_val(0.005);
+      c->mesh = add_mesh_option(*dec);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
       auto* cal = add_calibrate_command(cmd, *c);
