@@ -45,15 +45,9 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
   cmd.add_flag("--raw", v->raw,
                "Skip the robust filter: write the back-projected points (with sensor normals and "
                "confidences)");
-  FilterCliValues depth_defaults;
-  // Off for depth frames: on the PS1080's quantised depth the scale test reads the depth steps
-  // as structure and lowers h (the bundled recording's wall: 46 -> 39 mm), which leaves the
-  // walls locally rougher (bench/README.md, "Defaults").
-  depth_defaults.scale_gamma = 0;
-  // Off for depth frames as well: on the bundled recording it drops 1,288 points (0.55 %) a
-  // median 5.6 mm from the cleaned surface at a median depth of 3.7 m, where the sensor's
-  // depth noise is several times that: surface points, not outliers.
-  depth_defaults.displacement_sigma = 0;
+  // Depth frames take the library's preset (the scale and displacement tests off; see
+  // depth_frame_options() for why).
+  const FilterCliValues depth_defaults = values_of(depth_frame_options());
   auto filter = add_filter_options(cmd, depth_defaults);
   cmd.add_option("--normal-stencil", v->stencil,
                  "Half-width s (pixels) of the sensor-normal stencil on the depth image")

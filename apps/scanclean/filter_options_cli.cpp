@@ -104,6 +104,22 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
   return v;
 }
 
+FilterCliValues values_of(const FilterOptions& o) {
+  FilterCliValues v;
+  v.k_h = o.k_h;
+  v.noise_factor = o.noise_factor;
+  v.scale_gamma = o.scale_gamma;
+  v.kernel_stride = o.kernel_stride;
+  v.likelihood_ratio = o.likelihood_ratio;
+  v.displacement_sigma = o.displacement_sigma;
+  v.outlier_sigma = o.outlier_sigma;
+  v.tau = o.tau;
+  v.passes = o.passes;
+  v.k_min = o.k_min;
+  v.max_iterations = o.max_iterations;
+  return v;
+}
+
 FilterOptions to_filter_options(const FilterCliValues& c) {
   FilterOptions o;
   if (c.h > 0) {

@@ -45,6 +45,11 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd,
                                                     const FilterCliValues& defaults = {},
                                                     bool with_threads = true);
 
+//! The values that stand for the library's options `o`: what a command shows and starts from
+//! when it uses one of the library's presets (e.g. values_of(depth_frame_options())), so that
+//! defaults are decided once, in the library.
+FilterCliValues values_of(const FilterOptions& o);
+
 //! The FilterOptions for these values (not validated; the CLI checks already ran).
 FilterOptions to_filter_options(const FilterCliValues& values);
 

@@ -110,10 +110,13 @@ struct FilterOptions {
 //! Throws OptionError naming the option, the value and the valid range.
 void validate(const FilterOptions& options);
 
-//! Options for organized range frames (depth sensors, structured light): the library's defaults
-//! with the scale test and the displacement test off. On quantised depth frames the scale test
-//! lowers h and leaves walls rougher, and the displacement test takes surface points within the
-//! sensor noise (bench/README.md, "Defaults").
+//! Options for range frames from depth sensors (what replay and capture use): the library's
+//! defaults with two tests off. The scale test (scale_gamma) reads the PS1080's quantised depth
+//! steps as structure and lowers h (the bundled recording's wall: 46 -> 39 mm), which leaves the
+//! walls locally rougher. The displacement test (displacement_sigma) dropped 1,288 points (0.55 %)
+//! of the bundled recording a median 5.6 mm from the cleaned surface at a median depth of 3.7 m,
+//! where the sensor's depth noise is several times that: surface points, not outliers
+//! (bench/README.md, "Defaults").
 FilterOptions depth_frame_options();
 
 }  // namespace scanclean
