@@ -7,6 +7,7 @@
 
 #include <fstream>
 #include <iterator>
+#include <random>
 
 #include <opencv2/core.hpp>
 #include <string>
@@ -146,6 +147,52 @@ TEST(SlCalibrationParseTest, FileLimitsAreCheckedBeforeReading) {
     EXPECT_NE(std::string(e.what()).find("big.yml"), std::string::npos);
     EXPECT_NE(std::string(e.what()).find("larger than"), std::string::npos);
   }
+}
+
+// Seeded random mutations of valid YAML and XML (byte flips, insertions, truncations): every one
+// either parses or is an InputError, never another exception or a crash.
+TEST(SlCalibrationParseTest, MutatedFilesParseOrAreInputErrors) {
+  const SlCalibration c = test::make_sl_calibration();
+  const std::string yaml = written_by_opencv(c);
+  const auto kamino = test::make_temp_dir("sl_parse_mut") / "k.xml";
+  write_sl_calibration_kamino(kamino, c);
+  std::ifstream in(kamino);
+  const std::string xml(std::istreambuf_iterator<char>(in), {});
+  std::mt19937_64 rng(42);
+  std::string alphabet = "<>/\"=:[],.-+ \n\t0123456789eabcdrowsl_!%\x01";
+  alphabet += '\0';
+  alphabet += '\xff';
+  int parsed = 0, errors = 0;
+  for (int it = 0; it < 3000; ++it) {
+    std::string t = it % 2 ? yaml : xml;
+    const int edits = 1 + static_cast<int>(rng() % 4);
+    for (int e = 0; e < edits && !t.empty(); ++e) {
+      const std::size_t pos = rng() % t.size();
+      const char ch = alphabet[rng() % alphabet.size()];
+      switch (rng() % 4) {
+        case 0:
+          t[pos] = ch;
+          break;
+        case 1:
+          t.insert(pos, 1, ch);
+          break;
+        case 2:
+          t.erase(pos, 1 + rng() % 8);
+          break;
+        default:
+          t.resize(pos);
+          break;
+      }
+    }
+    try {
+      parse_sl_calibration(t, "mutated");
+      ++parsed;
+    } catch (const InputError&) {
+      ++errors;
+    }
+  }
+  std::printf("mutations: %d parsed, %d InputErrors\n", parsed, errors);
+  EXPECT_GT(errors, 1000);
 }
 
 }  // namespace
