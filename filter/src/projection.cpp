@@ -122,8 +122,8 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     const double nb_len = nb.norm();
     nb = nb_len > 1e-12 * s.s ? Eigen::Vector3d(nb / nb_len) : nref.cast<double>();
     const double mu = m.dot(nb);
-    // Both updates stop on the normal part |mu| (eq. 10 on the normal part, ALGORITHM.md 3):
-    // the tangential part of m never dies out.
+    // Both updates stop on the normal part |mu| (eq. 10 on the normal part, docs/ALGORITHM.md
+    // section 3): the tangential part of m never dies out.
     if (o.update == UpdateMode::kNormal) {
       // The mean shift converges linearly: along the normal, successive steps shrink by a
       // nearly constant ratio r. When two steps agree in sign with r < 0.8, the step is

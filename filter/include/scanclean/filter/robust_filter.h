@@ -1,7 +1,7 @@
 #pragma once
 //! \file robust_filter.h
 //! The robust filter of Schall, Belyaev, Seidel (2005), "Robust Filtering of Noisy Scattered
-//! Point Data", as specified in docs ALGORITHM.md: anisotropic likelihood kernels from weighted
+//! Point Data", as specified in docs/ALGORITHM.md: anisotropic likelihood kernels from weighted
 //! PCA, a mean-shift-like projection of every point onto a maximum of the likelihood, greedy
 //! clustering of the converged points and density-threshold outlier removal.
 //!
