@@ -42,28 +42,46 @@ PointCloud sorted_by_source(const PointCloud& cloud) {
 
 Coincident find_coincident(const PointCloud& input) {
   const std::size_t n = input.size();
-  Coincident c;
-  c.group_of.resize(n);
-  std::vector<std::uint32_t> order(n);
-  std::iota(order.begin(), order.end(), 0u);
   const auto& p = input.positions;
-  auto less = [&](std::uint32_t a, std::uint32_t b) {
-    for (int k = 0; k < 3; ++k) {
-      const std::uint64_t x = bits_of(p[a][k]), y = bits_of(p[b][k]);
-      if (x != y) return x < y;
-    }
-    return a < b;
-  };
-  tbb::parallel_sort(order.begin(), order.end(), less);
   auto same = [&](std::uint32_t a, std::uint32_t b) {
     for (int k = 0; k < 3; ++k)
       if (bits_of(p[a][k]) != bits_of(p[b][k])) return false;
     return true;
   };
-  // Groups in the order of their first input index.
-  std::vector<std::uint32_t> head(n);  // per input point: the first index of its group
-  for (std::size_t k = 0; k < n; ++k)
-    head[order[k]] = (k > 0 && same(order[k - 1], order[k])) ? head[order[k - 1]] : order[k];
+  // Sort (hash of the position, index) pairs: equal positions have equal hashes, and the pairs
+  // are compact (no indirection while sorting). Within a run of equal hashes, the points are
+  // grouped by exact equality; a group's head is its smallest index.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> key(n);
+  parallel_each(n, [&](std::size_t i) {
+    std::uint64_t h = 0x9E3779B97F4A7C15ULL;
+    for (int k = 0; k < 3; ++k) {
+      h ^= bits_of(p[i][k]) + 0x9E3779B97F4A7C15ULL + (h << 6) + (h >> 2);
+      h *= 0xBF58476D1CE4E5B9ULL;
+      h ^= h >> 31;
+    }
+    key[i] = {h, static_cast<std::uint32_t>(i)};
+  });
+  tbb::parallel_sort(key.begin(), key.end());
+  std::vector<std::uint32_t> head(n);
+  bool any = false;
+  for (std::size_t b = 0; b < n;) {
+    std::size_t e = b + 1;
+    while (e < n && key[e].first == key[b].first) ++e;
+    for (std::size_t k = b; k < e; ++k) {
+      const std::uint32_t i = key[k].second;
+      head[i] = i;
+      for (std::size_t q = b; q < k; ++q)  // the earliest equal one (runs are short)
+        if (head[key[q].second] == key[q].second && same(key[q].second, i)) {
+          head[i] = key[q].second;
+          any = true;
+          break;
+        }
+    }
+    b = e;
+  }
+  Coincident c;
+  if (!any) return c;  // the common case: no copies (and no memory held for them)
+  c.group_of.resize(n);
   std::vector<std::uint32_t> group_at(n, kNone);
   for (std::size_t i = 0; i < n; ++i) {
     if (head[i] == i) {

@@ -22,15 +22,16 @@
 
 namespace scanclean::detail {
 
+//! The groups of coincident points; all empty when every position is distinct.
 struct Coincident {
   std::vector<std::size_t> first;       //!< per distinct position: its first input index
   std::vector<std::uint32_t> group_of;  //!< per input point: its position's index in first
   std::vector<std::uint32_t> count;     //!< per distinct position: the input points there
-  bool any() const { return first.size() < group_of.size(); }
+  bool any() const { return !first.empty(); }
 };
 
 //! Groups the input points by exact position (bitwise equal coordinates; +0 and -0 are equal).
-//! Deterministic; parallel sort.
+//! Deterministic; a parallel sort of position hashes.
 Coincident find_coincident(const PointCloud& input);
 
 //! The indices of the bulk (near) and of the far points (increasing). far is empty when no point
