@@ -51,11 +51,11 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
   auto filter = add_filter_options(cmd, depth_defaults);
   cmd.add_option("--normal-stencil", v->stencil,
                  "Half-width s (pixels) of the sensor-normal stencil on the depth image")
-      ->check(integer_in(1, 16))
+      ->check(integer_in(1, 32))
       ->capture_default_str();
   cmd.add_option("--edge-margin", v->edge_margin,
                  "Drop pixels within this many pixels of a depth jump (flying pixels); 0 = off")
-      ->check(integer_in(0, 64))
+      ->check(integer_in(0, 32))
       ->capture_default_str();
   cmd.add_option("--min-depth", v->min_depth, "Drop points nearer than this (metres; 0 = off)")
       ->check(non_negative_number());

@@ -238,13 +238,13 @@ TEST(ScancleanChecksTest, FilterTakesAPositionalOutputAsTheReadmeSays) {
 TEST(ScancleanChecksTest, InfoOnManyCoincidentPointsFinishes) {
   const auto dir = test::make_temp_dir("checks");
   PointCloud c;
-  c.positions.assign(300000, Eigen::Vector3d(0.5, -0.25, 1.0));
+  c.positions.assign(1000000, Eigen::Vector3d(0.5, -0.25, 1.0));
   c.positions.push_back(Eigen::Vector3d(0.5, -0.25, 1.001));
   write_point_cloud(dir / "same.ply", c);
   const Outcome r = run({"info", (dir / "same.ply").string()}, dir, 60);
   ASSERT_EQ(r.exit_code, 0) << "exit " << r.exit_code << " (124 = still running after 60 s)\n"
                             << r.err;
-  EXPECT_TRUE(has(r.out, "299,999 repeat an earlier position")) << r.out;
+  EXPECT_TRUE(has(r.out, "999,999 repeat an earlier position")) << r.out;
   EXPECT_TRUE(has(r.out, "1.000 mm")) << r.out;
 }
 
