@@ -85,7 +85,11 @@ struct MeshResult {
 //! filter's are consistent when the input had sensor normals). \throw OptionError (validate),
 //! InputError when the cloud has fewer than kMinMeshPoints points, non-finite coordinates, no
 //! normals (kPoisson) or zero normals, or when the reconstruction produces no triangle (e.g. all
-//! points collinear for kAdvancingFront). Deterministic (CGAL's random generator is seeded).
+//! points collinear for kAdvancingFront). Triangles come in a canonical order (each piece
+//! oriented to a positive signed volume: closed pieces face outwards). kPoisson is deterministic
+//! (CGAL's random generator is seeded); kAdvancingFront is on clean samples, but CGAL breaks ties
+//! between equal candidates by memory address, so on noisy input a few percent of the triangles
+//! can differ between runs.
 MeshResult reconstruct_surface(const PointCloud& cloud, const MeshOptions& options = {});
 
 //! Average distance to the k nearest neighbours, averaged over the points
