@@ -4,7 +4,6 @@
 
 #include <Eigen/Geometry>
 
-#include <chrono>
 #include <limits>
 #include <random>
 #include <thread>
@@ -131,30 +130,21 @@ TEST(MeshDistanceTest, RejectsEmptyMeshAndBadIndices) {
   EXPECT_THROW(MeshDistance{m}, InputError);
 }
 
-TEST(MeshDistanceTest, BunnyQueriesAreFast) {
+TEST(MeshDistanceTest, BunnyQueriesMatchBruteForce) {
   // recordings/bunny/bun_zipper.ply is part of the repository (35,947 vertices, 69,451 faces).
+  // The BVH's speed is the benchmark's to measure (scanclean_bench --suite real), not a test's:
+  // a wall-clock limit fails on a loaded machine.
   const TriangleMesh m = read_triangle_mesh(test::recordings_dir() / "bunny/bun_zipper.ply");
   ASSERT_EQ(m.triangles.size(), 69451u);
   const MeshDistance md(m);
   std::mt19937 rng(6);  // seed 6
   std::normal_distribution<double> noise(0.0, 0.002);
   std::uniform_int_distribution<std::size_t> pick(0, m.vertices.size() - 1);
-  std::vector<Eigen::Vector3d> pts(50000);
-  for (auto& p : pts)
-    p = m.vertices[pick(rng)] + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
-  const auto t0 = std::chrono::steady_clock::now();
-  double sum = 0;
-  for (const auto& p : pts) sum += md.distance(p);
-  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("50,000 queries on the bunny: %.3f s, mean distance %.3f mm\n", s,
-              sum / pts.size() * 1e3);
-  // spot check against brute force
-  for (int i = 0; i < 20; ++i) ASSERT_NEAR(md.distance(pts[i]), brute_force(m, pts[i]), 1e-12);
-#if defined(__SANITIZE_ADDRESS__)
-  EXPECT_LT(s, 10.0);
-#elif defined(__OPTIMIZE__)
-  EXPECT_LT(s, 1.0);
-#endif
+  for (int i = 0; i < 200; ++i) {
+    const Eigen::Vector3d p =
+        m.vertices[pick(rng)] + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    ASSERT_NEAR(md.distance(p), brute_force(m, p), 1e-12) << "query " << i;
+  }
 }
 
 }  // namespace

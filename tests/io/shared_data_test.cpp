@@ -1,8 +1,6 @@
 // Every bundled real file reads with the counts and bounds measured in shared/data/PROVENANCE.md.
 #include <gtest/gtest.h>
 
-#include <chrono>
-
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/io/triangle_mesh_io.h"
 #include "support/data_paths.h"
@@ -108,21 +106,14 @@ TEST(SharedDataTest, DragonStrayByeLinesAreReportedAsWarnings) {
       << r.warnings[0];
 }
 
-TEST(SharedDataTest, BunnyMeshHasTheDocumentedSizeAndReadsFast) {
+TEST(SharedDataTest, BunnyMeshHasTheDocumentedSize) {
+  // How fast it reads is the benchmark's to measure, not a test's (a wall-clock limit fails on a
+  // loaded machine).
   SCANCLEAN_REQUIRE_SHARED("stanford_bunny/reconstruction/bun_zipper.ply");
-  const auto t0 = std::chrono::steady_clock::now();
   const TriangleMesh m =
       read_triangle_mesh(test::shared_data_dir() / "stanford_bunny/reconstruction/bun_zipper.ply");
-  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_EQ(m.vertices.size(), 35947u);
   EXPECT_EQ(m.triangles.size(), 69451u);
-#if !defined(__SANITIZE_ADDRESS__) && !defined(__OPTIMIZE__)
-  (void)s;
-#elif defined(__SANITIZE_ADDRESS__)
-  EXPECT_LT(s, 5.0);
-#else
-  EXPECT_LT(s, 0.5);  // a 2.9 MB ascii PLY
-#endif
 }
 
 }  // namespace
