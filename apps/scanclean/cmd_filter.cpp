@@ -16,8 +16,8 @@
 #include "scanclean/filter/robust_filter.h"
 #include "scanclean/filter_options_cli.h"
 #include "scanclean/io/point_cloud_io.h"
-#include "scanclean/output_checks.h"
 #include "scanclean/mesh_handoff.h"
+#include "scanclean/output_checks.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
