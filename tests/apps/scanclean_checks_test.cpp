@@ -3,7 +3,6 @@
 // checks the exit code, the message and the files left behind.
 
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -16,6 +15,7 @@
 
 #include "scanclean/io/point_cloud_io.h"
 #include "support/data_paths.h"
+#include "support/program_run.h"
 #include "support/synthetic.h"
 
 namespace fs = std::filesystem;
@@ -23,36 +23,12 @@ namespace fs = std::filesystem;
 namespace scanclean {
 namespace {
 
-struct Outcome {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-std::string quoted(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::string slurp(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using Outcome = test::ProgramRun;
+using test::slurp;
 
 //! The program with `args`, stdin from /dev/null; killed after `limit_s` seconds (exit 124).
 Outcome run(const std::vector<std::string>& args, const fs::path& dir, int limit_s = 120) {
-  std::string command = "timeout " + std::to_string(limit_s) + " " + quoted(SCANCLEAN_PROGRAM);
-  for (const auto& a : args) command += " " + quoted(a);
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  command += " </dev/null >" + quoted(out.string()) + " 2>" + quoted(err.string());
-  const int status = std::system(command.c_str());
-  Outcome r;
-  if (status != -1 && WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return test::run_program(SCANCLEAN_PROGRAM, args, dir, limit_s);
 }
 
 bool has(const std::string& text, const std::string& part) {

@@ -1,7 +1,6 @@
 // `scanclean mesh` and `filter --mesh` end to end: child processes, exit codes, files read back.
 
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +12,7 @@
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/io/triangle_mesh_io.h"
 #include "support/data_paths.h"
+#include "support/program_run.h"
 #include "support/synthetic.h"
 
 #ifdef SCANCLEAN_PROGRAM
@@ -22,35 +22,11 @@ namespace fs = std::filesystem;
 namespace scanclean {
 namespace {
 
-struct ProgramRun {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-std::string quoted(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::string slurp(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::ProgramRun;
+using test::slurp;
 
 ProgramRun run(const std::vector<std::string>& args, const fs::path& dir) {
-  std::string command = quoted(SCANCLEAN_PROGRAM);
-  for (const auto& a : args) command += " " + quoted(a);
-  const fs::path out = dir / "stdout.txt", err = dir / "stderr.txt";
-  command += " </dev/null >" + quoted(out.string()) + " 2>" + quoted(err.string());
-  const int status = std::system(command.c_str());
-  ProgramRun r;
-  if (status != -1 && WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
-  r.out = slurp(out);
-  r.err = slurp(err);
-  return r;
+  return test::run_program(SCANCLEAN_PROGRAM, args, dir);
 }
 
 bool contains(const std::string& text, const std::string& part) {
