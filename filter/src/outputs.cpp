@@ -19,13 +19,17 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
   auto mult = [&](std::size_t s) -> std::size_t {
     return in.multiplicity ? (*in.multiplicity)[src[s]] : 1;
   };
-  // Input points each representative stands for.
-  std::vector<std::uint64_t> members(cl.count.begin(), cl.count.end());
+  // Input points each representative stands for: its members, or with coincident copies the
+  // copies its members stand for.
+  std::vector<std::uint64_t> copies;
   if (in.multiplicity) {
-    std::fill(members.begin(), members.end(), 0);
+    copies.assign(R, 0);
     for (std::size_t s = 0; s < N; ++s)
-      if (cl.rep_of[s] != kNone) members[cl.rep_of[s]] += mult(s);
+      if (cl.rep_of[s] != kNone) copies[cl.rep_of[s]] += mult(s);
   }
+  auto members = [&](std::uint32_t r) -> std::uint64_t {
+    return in.multiplicity ? copies[r] : cl.count[r];
+  };
   // Output points in the input order of their seeds (seeds are distinct input points).
   std::vector<std::uint32_t> kept;
   {
@@ -53,7 +57,7 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       L[k] = pr.L[s];
       it[k] = pr.iterations[s];
       fl[k] = pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0;
-      mc[k] = static_cast<double>(members[r]);
+      mc[k] = static_cast<double>(members(r));
       si[k] = src[s];
     });
     out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
@@ -62,7 +66,7 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     out.set_attribute("merge_count", AttributeType::kUInt32, std::move(mc));
     out.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
     st.points_out = kept.size();
-    for (std::uint32_t r : kept) st.merged += members[r] - 1;
+    for (std::uint32_t r : kept) st.merged += members(r) - 1;
   }
   {
     std::vector<std::uint8_t> in_flag(N, 0);

@@ -14,16 +14,13 @@
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/sl_triangulate.h"
 #include "sl_capture_impl.h"
+#include "sl_opencv.h"
 
 namespace scanclean {
 namespace {
 
-cv::Mat camera_matrix(const Intrinsics& k) {
-  return (cv::Mat_<double>(3, 3) << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
-}
-cv::Mat dist_coeffs(const Intrinsics& k) {
-  return (cv::Mat_<double>(1, 5) << k.dist[0], k.dist[1], k.dist[2], k.dist[3], k.dist[4]);
-}
+using sl_detail::camera_matrix;
+using sl_detail::dist_coeffs;
 
 SlPlaneStats stats_of(const std::vector<Eigen::Vector3d>& pts, const PlaneFit& f) {
   SlPlaneStats s;

@@ -16,6 +16,7 @@
 
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
+#include "sl_opencv.h"
 
 namespace scanclean {
 namespace {
@@ -636,12 +637,8 @@ SlCalibration read_sl_calibration(const std::filesystem::path& file) {
 }
 
 void write_sl_calibration(const std::filesystem::path& file, const SlCalibration& c) {
-  auto K = [](const Intrinsics& k) -> cv::Mat {
-    return (cv::Mat_<double>(3, 3) << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
-  };
-  auto D = [](const Intrinsics& k) -> cv::Mat {
-    return (cv::Mat_<double>(1, 5) << k.dist[0], k.dist[1], k.dist[2], k.dist[3], k.dist[4]);
-  };
+  const auto K = sl_detail::camera_matrix;
+  const auto D = sl_detail::dist_coeffs;
   cv::Mat R(3, 3, CV_64F), T(3, 1, CV_64F);
   for (int i = 0; i < 3; ++i) {
     T.at<double>(i) = c.T(i);
