@@ -83,20 +83,6 @@ std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clou
   return out;
 }
 
-FilterResult accumulate_and_clean(const std::vector<RangeFrame>& frames, const SourceInfo& info,
-                                  const FrameToPointsOptions& points_options,
-                                  const FilterOptions& filter_options, bool fuse) {
-  std::vector<PointCloud> clouds;
-  clouds.reserve(frames.size());
-  for (const auto& f : frames) clouds.push_back(frame_to_points(f, info, points_options));
-  if (fuse && clouds.size() > 1)
-    if (auto fused = fuse_static_clouds(clouds)) {
-      fused->grid = {};
-      return robust_filter(*fused, filter_options);
-    }
-  return robust_filter(accumulate_clouds(clouds), filter_options);
-}
-
 TemporalSpread temporal_depth_spread(const std::vector<RangeFrame>& frames) {
   if (frames.empty()) throw InputError("temporal_depth_spread: no frames");
   TemporalSpread t;

@@ -1,16 +1,21 @@
 #include "scanclean/pipeline/pipeline.h"
 
+#include <tbb/flow_graph.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <optional>
+#include <exception>
+#include <memory>
 #include <string>
-#include <thread>
 #include <utility>
 #include <vector>
 
 #include "scanclean/core/errors.h"
-#include "scanclean/pipeline/accumulate.h"
 
 namespace scanclean {
 namespace {
@@ -21,47 +26,65 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
+std::size_t frame_bytes(const RangeFrame& f) {
+  std::size_t b = sizeof(RangeFrame) + f.depth.data.size() * sizeof(std::uint16_t);
+  if (f.points) b += f.points->data.size() * sizeof(Eigen::Vector3f);
+  if (f.confidence) b += f.confidence->data.size() * sizeof(float);
+  if (f.sensor_normals) b += f.sensor_normals->data.size() * sizeof(Eigen::Vector3f);
+  return b;
+}
+
+// One window on its way through the stages.
+struct Job {
+  std::size_t window = 0;
+  std::uint64_t first_frame = 0;
+  std::vector<RangeFrame> frames;
+  std::vector<Clock::time_point> arrival;  // per frame
+  std::size_t bytes = 0;
+  WindowInput input;
+  WindowResult result;
+};
+using JobPtr = std::shared_ptr<Job>;
+
+double percentile(std::vector<double>& v, double q) {
+  if (v.empty()) return 0;
+  const auto k = static_cast<std::size_t>(std::llround(q * static_cast<double>(v.size() - 1)));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
 }  // namespace
+
+WindowOptions window_options(const PipelineOptions& o) {
+  WindowOptions w;
+  w.points = o.points;
+  w.fuse = o.fuse;
+  w.raw = o.raw;
+  w.filter = o.filter;
+  return w;
+}
+
+AcquisitionOptions acquisition_options(const PipelineOptions& o) {
+  AcquisitionOptions a;
+  a.max_frames = o.last_frame;
+  a.max_seconds = o.max_seconds;
+  a.timeout = o.timeout;
+  a.max_consecutive_timeouts = o.max_consecutive_timeouts;
+  a.reconnect_attempts = o.reconnect_attempts;
+  a.reconnect_delay = o.reconnect_delay;
+  a.keep_going = o.keep_going;
+  return a;
+}
 
 void validate(const PipelineOptions& o) {
   if (o.last_frame != 0 && o.last_frame <= o.first_frame)
     throw OptionError("pipeline: frame range " + std::to_string(o.first_frame) + ":" +
                       std::to_string(o.last_frame) +
                       " is empty; give A:B with B > A (or B empty for 'to the end')");
-  if (o.max_seconds < 0)
-    throw OptionError("pipeline: option max_seconds = " + std::to_string(o.max_seconds) +
-                      " is out of range; valid: >= 0 (0 = no limit)");
-  if (o.timeout.count() <= 0)
-    throw OptionError("pipeline: option timeout = " + std::to_string(o.timeout.count()) +
-                      " ms is out of range; valid: > 0 ms");
-  if (o.max_consecutive_timeouts < 0)
-    throw OptionError("pipeline: option max_consecutive_timeouts = " +
-                      std::to_string(o.max_consecutive_timeouts) + " is out of range; valid: >= 0");
-  if (o.reconnect_attempts < 0)
-    throw OptionError("pipeline: option reconnect_attempts = " +
-                      std::to_string(o.reconnect_attempts) + " is out of range; valid: >= 0");
-  validate(o.points);
-  if (!o.raw) validate(o.filter);
-}
-
-const char* to_string(StopReason reason) {
-  switch (reason) {
-    case StopReason::kEndOfStream:
-      return "end of stream";
-    case StopReason::kFrameLimit:
-      return "frame range done";
-    case StopReason::kTimeLimit:
-      return "time limit";
-    case StopReason::kDisconnected:
-      return "disconnected";
-    case StopReason::kTimeouts:
-      return "too many timeouts";
-    case StopReason::kInterrupted:
-      return "interrupted";
-    case StopReason::kError:
-      return "read error";
-  }
-  return "unknown";
+  if (o.memory_budget_bytes == 0)
+    throw OptionError("pipeline: option memory_budget_bytes = 0 is out of range; valid: > 0");
+  validate(acquisition_options(o));
+  validate(window_options(o));
 }
 
 PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
@@ -72,188 +95,175 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
   PipelineStats st;
   if (!already_open) source.open();
   st.info = source.info();
+  const SourceInfo info = st.info;
+  const WindowOptions wopts = window_options(options);
+  const bool may_skip = options.backlog == PipelineOptions::Backlog::kSkip ||
+                        (options.backlog == PipelineOptions::Backlog::kAuto &&
+                         (info.kind == "openni2" || info.kind == "vsensor"));
 
-  std::vector<PointCloud> window;
-  std::uint64_t window_first = 0;
-  auto flush = [&] {
-    if (window.empty()) return;
-    WindowOutput out;
-    out.window = st.windows;
-    out.first_frame = window_first;
-    out.frames = window.size();
-    out.last_frame = window_first + window.size() - 1;
-    PointCloud merged;
-    std::optional<PointCloud> fused;
-    if (!options.raw && options.fuse && window.size() > 1) {
-      std::size_t rejected = 0;
-      fused = fuse_static_clouds(window, {}, &rejected);
-      if (fused) {
-        st.fusion_rejected += rejected;
-        st.points_fused += fused->size();
-        merged = std::move(*fused);
-        merged.grid = {};
+  // The stages run on TBB workers while this thread acquires: one worker more than the default
+  // (whose one master slot this thread, busy reading the source, would not use).
+  const int workers = std::max(1, tbb::info::default_concurrency());
+  tbb::global_control parallelism(tbb::global_control::max_allowed_parallelism,
+                                  static_cast<std::size_t>(workers) + 1);
+  tbb::task_arena arena(workers + 1, 1);
+
+  // Written only by the (serial) output stage; read after the graph is done.
+  struct WindowCounts {
+    std::size_t windows = 0, points_in = 0, points_out = 0, outliers = 0, points_fused = 0,
+                fusion_rejected = 0, edge_dropped = 0, out_of_range = 0, no_normal = 0;
+    std::size_t min_pf = 0, max_pf = 0;
+    std::uint64_t frames_cleaned = 0;
+    double seconds_points = 0, seconds_filter = 0;
+    std::vector<double> latencies;
+  } wc;
+  std::atomic<std::size_t> waiting_bytes{0};
+  std::size_t peak_waiting = 0;
+
+  std::unique_ptr<tbb::flow::graph> g;
+  using Node = tbb::flow::function_node<JobPtr, JobPtr>;
+  std::unique_ptr<Node> fuse_node, filter_node;
+  std::unique_ptr<tbb::flow::function_node<JobPtr>> out_node;
+  arena.execute([&] {
+    g = std::make_unique<tbb::flow::graph>();
+    fuse_node = std::make_unique<Node>(*g, tbb::flow::serial, [&](JobPtr j) {
+      if (options.before_cleaning) options.before_cleaning(j->window);
+      j->input = window_input(j->frames, info, wopts);
+      j->frames = {};
+      return j;
+    });
+    filter_node = std::make_unique<Node>(*g, tbb::flow::serial, [&](JobPtr j) {
+      if (options.on_cleaning) options.on_cleaning(j->window, true);
+      j->result = clean_window_input(std::move(j->input), wopts);
+      if (options.on_cleaning) options.on_cleaning(j->window, false);
+      return j;
+    });
+    out_node =
+        std::make_unique<tbb::flow::function_node<JobPtr>>(*g, tbb::flow::serial, [&](JobPtr j) {
+          const WindowInput& in = j->input;  // moved-from cloud; the counts are intact
+          wc.min_pf = wc.windows == 0 ? in.min_points_per_frame
+                                      : std::min(wc.min_pf, in.min_points_per_frame);
+          wc.max_pf = std::max(wc.max_pf, in.max_points_per_frame);
+          ++wc.windows;
+          wc.points_in += in.points_in;
+          wc.points_fused += in.points_fused;
+          wc.fusion_rejected += in.fusion_rejected;
+          wc.edge_dropped += in.edge_dropped;
+          wc.out_of_range += in.out_of_range;
+          wc.no_normal += in.no_normal;
+          wc.seconds_points += in.seconds_points;
+          wc.seconds_filter += j->result.seconds_filter;
+          wc.outliers += j->result.filter.removed();
+          wc.points_out += j->result.cloud.size();
+          wc.frames_cleaned += in.frames;
+          WindowOutput out;
+          out.window = j->window;
+          out.first_frame = j->first_frame;
+          out.frames = in.frames;
+          out.last_frame = j->first_frame + in.frames - 1;
+          out.cloud = std::move(j->result.cloud);
+          out.outliers = std::move(j->result.outliers);
+          out.filter = j->result.filter;
+          if (on_window) on_window(std::move(out));
+          const auto now = Clock::now();
+          for (const auto& t : j->arrival)
+            wc.latencies.push_back(std::chrono::duration<double>(now - t).count());
+          waiting_bytes -= j->bytes;
+          return tbb::flow::continue_msg();
+        });
+    tbb::flow::make_edge(*fuse_node, *filter_node);
+    tbb::flow::make_edge(*filter_node, *out_node);
+  });
+  auto wait_all = [&] { arena.execute([&] { g->wait_for_all(); }); };
+
+  JobPtr job;
+  std::uint64_t first_index = 0, last_index = 0;
+  std::size_t next_window = 0;
+  // Hands the collected window on (or skips it); `last`: acquisition has ended.
+  auto flush = [&](bool last) {
+    if (!job || job->frames.empty()) return;
+    JobPtr j = std::move(job);
+    job.reset();
+    const std::size_t waiting = waiting_bytes.load();
+    if (waiting > 0 && waiting + j->bytes > options.memory_budget_bytes) {
+      if (may_skip && !last) {
+        SkippedWindow s;
+        s.window = j->window;
+        s.first_frame = j->first_frame;
+        s.last_frame = j->first_frame + j->frames.size() - 1;
+        s.first_index = first_index;
+        s.last_index = last_index;
+        st.skipped.push_back(s);
+        return;
       }
+      wait_all();  // a file source: never skip, wait for the backlog to be cleaned
     }
-    if (!fused) merged = accumulate_clouds(window);
-    window.clear();
-    if (options.raw) {
-      out.cloud = std::move(merged);
-    } else {
-      const auto t = Clock::now();
-      FilterResult r = robust_filter(merged, options.filter);
-      st.seconds_filter += seconds_since(t);
-      st.outliers += r.stats.removed();
-      out.cloud = std::move(r.cloud);
-      out.outliers = std::move(r.outliers);
-      out.filter = r.stats;
-    }
-    st.points_out += out.cloud.size();
-    ++st.windows;
-    if (on_window) on_window(std::move(out));
+    waiting_bytes += j->bytes;
+    peak_waiting = std::max(peak_waiting, waiting_bytes.load());
+    arena.execute([&] { fuse_node->try_put(std::move(j)); });
   };
 
-  bool have_last_index = false;
-  std::uint64_t last_index = 0;
-  bool have_first_index = false, after_reconnect = false;
-  std::uint64_t first_index = 0, reconnects_seen = 0;
-  int attempts_used = 0;
-  std::int64_t last_host_ns = 0;
-  double period_sum = 0;
-  std::uint64_t period_count = 0;
-  std::int64_t last_ts = 0;
-  int consecutive_timeouts = 0;
-  std::uint64_t position = 0;  // delivery position of the next kOk frame
-  RangeFrame frame;
-  for (;;) {
-    if (options.keep_going && !options.keep_going()) {
-      st.stop = StopReason::kInterrupted;
-      break;
+  AcquisitionOptions ao = acquisition_options(options);
+  ao.keep_going = [&] {
+    if (g->is_cancelled()) return false;  // a stage failed: stop, the error is rethrown below
+    return !options.keep_going || options.keep_going();
+  };
+  try {
+    static_cast<AcquisitionStats&>(st) =
+        acquire(source, ao, [&](RangeFrame& frame, std::uint64_t pos) {
+          if (pos < options.first_frame) return;
+          const auto now = Clock::now();
+          if (!job) {
+            job = std::make_shared<Job>();
+            job->first_frame = pos;
+            job->window =
+                options.accumulate > 0
+                    ? static_cast<std::size_t>((pos - options.first_frame) / options.accumulate)
+                    : next_window;
+            first_index = frame.index;
+            if (options.accumulate > 0)
+              job->frames.reserve(std::min<std::size_t>(options.accumulate, 1024));
+          }
+          last_index = frame.index;
+          job->bytes += frame_bytes(frame);
+          job->frames.push_back(std::move(frame));
+          job->arrival.push_back(now);
+          ++st.frames_used;
+          if (options.on_frame) options.on_frame(st.frames_used);
+          if (options.accumulate > 0 && job->frames.size() >= options.accumulate) {
+            next_window = job->window + 1;
+            flush(false);
+          }
+        });
+    flush(true);  // the last (possibly partial) window: nothing read is lost
+    wait_all();
+  } catch (...) {
+    const std::exception_ptr e = std::current_exception();
+    g->cancel();
+    try {
+      wait_all();
+    } catch (...) {  // the first error is the one reported
     }
-    if (options.max_seconds > 0 && seconds_since(start) >= options.max_seconds) {
-      st.stop = StopReason::kTimeLimit;
-      break;
-    }
-    if (options.last_frame != 0 && position >= options.last_frame) {
-      st.stop = StopReason::kFrameLimit;
-      break;
-    }
-    const auto t_read = Clock::now();
-    const ReadStatus status = source.next(frame, options.timeout);
-    st.seconds_read += seconds_since(t_read);
-    if (status == ReadStatus::kTimeout) {
-      ++st.timeouts;
-      if (options.max_consecutive_timeouts > 0 &&
-          ++consecutive_timeouts >= options.max_consecutive_timeouts) {
-        st.stop = StopReason::kTimeouts;
-        break;
-      }
-      continue;
-    }
-    if (status == ReadStatus::kEndOfStream) {
-      st.stop = StopReason::kEndOfStream;
-      // Frames dropped after the last one delivered leave no index gap behind them: count them
-      // from the source's stated frame count, when the indices seen so far are consistent with
-      // it (indices first_index .. first_index + frame_count - 1).
-      if (have_first_index && st.info.frame_count && reconnects_seen == 0) {
-        const std::uint64_t expected_last = first_index + *st.info.frame_count - 1;
-        if (*st.info.frame_count > 0 && expected_last > last_index) {
-          st.trailing_dropped_frames = expected_last - last_index;
-          st.dropped_frames += st.trailing_dropped_frames;
-          ++st.gap_events;
-        }
-      }
-      break;
-    }
-    if (status == ReadStatus::kError) {
-      st.stop = StopReason::kError;
-      st.message = source.last_error();
-      break;
-    }
-    if (status == ReadStatus::kDisconnected) {
-      ++st.disconnects;
-      st.message = source.last_error();
-      bool reopened = false;
-      while (attempts_used < options.reconnect_attempts && !reopened) {
-        ++attempts_used;
-        if (options.keep_going && !options.keep_going()) break;
-        source.close();
-        std::this_thread::sleep_for(options.reconnect_delay);
-        try {
-          source.open();
-          reopened = true;
-        } catch (const UnavailableError&) {
-          // still gone; try again
-        }
-      }
-      if (!reopened) {
-        st.stop = StopReason::kDisconnected;
-        if (options.reconnect_attempts > 0 && attempts_used >= options.reconnect_attempts) {
-          st.reconnect_budget_exhausted = true;
-          st.message = "gave up after " + std::to_string(attempts_used) +
-                       " reconnect attempts in total (" + std::to_string(st.disconnects) +
-                       " disconnects)" + (st.message.empty() ? "" : "; last: " + st.message);
-        }
-        break;
-      }
-      ++st.reconnects;
-      ++reconnects_seen;
-      after_reconnect = have_last_index;
-      have_last_index = false;  // a reopened device may restart its indices
-      continue;
-    }
-    consecutive_timeouts = 0;
-    ++st.frames_read;
-    if (!have_first_index) {
-      have_first_index = true;
-      first_index = frame.index;
-    }
-    if (after_reconnect) {
-      after_reconnect = false;
-      if (frame.index > last_index + 1) {
-        st.reconnect_lost_frames += frame.index - last_index - 1;  // the device kept counting
-      } else if (period_count > 0 && frame.host_ts_ns > last_host_ns) {
-        const double period = period_sum / static_cast<double>(period_count);
-        const double gap = static_cast<double>(frame.host_ts_ns - last_host_ns);
-        if (period > 0 && gap > 1.5 * period)
-          st.reconnect_lost_frames += static_cast<std::uint64_t>(std::llround(gap / period)) - 1;
-      }
-    } else if (have_last_index && frame.host_ts_ns > last_host_ns) {
-      period_sum += static_cast<double>(frame.host_ts_ns - last_host_ns);
-      ++period_count;
-    }
-    last_host_ns = frame.host_ts_ns;
-    if (have_last_index && frame.index > last_index + 1) {
-      st.dropped_frames += frame.index - last_index - 1;
-      ++st.gap_events;
-    }
-    if (have_last_index && frame.device_ts_us <= last_ts) ++st.non_increasing_timestamps;
-    have_last_index = true;
-    last_index = frame.index;
-    last_ts = frame.device_ts_us;
-    const std::uint64_t pos = position++;
-    if (pos < options.first_frame) continue;
-
-    const auto t_pts = Clock::now();
-    FrameToPointsStats fs;
-    PointCloud cloud = frame_to_points(frame, st.info, options.points, &fs);
-    st.seconds_points += seconds_since(t_pts);
-    st.edge_dropped += fs.edge_dropped;
-    st.out_of_range += fs.out_of_range;
-    st.no_normal += fs.no_normal;
-    st.points_in += cloud.size();
-    if (st.frames_used == 0) {
-      st.min_points_per_frame = st.max_points_per_frame = cloud.size();
-    } else {
-      st.min_points_per_frame = std::min(st.min_points_per_frame, cloud.size());
-      st.max_points_per_frame = std::max(st.max_points_per_frame, cloud.size());
-    }
-    ++st.frames_used;
-    if (window.empty()) window_first = pos;
-    window.push_back(std::move(cloud));
-    if (options.on_frame) options.on_frame(st.frames_used);
-    if (options.accumulate > 0 && window.size() >= options.accumulate) flush();
+    std::rethrow_exception(e);
   }
-  flush();  // the last (possibly partial) window: nothing read is lost
+
+  st.windows = wc.windows;
+  st.frames_cleaned = wc.frames_cleaned;
+  st.points_in = wc.points_in;
+  st.points_out = wc.points_out;
+  st.outliers = wc.outliers;
+  st.points_fused = wc.points_fused;
+  st.fusion_rejected = wc.fusion_rejected;
+  st.edge_dropped = wc.edge_dropped;
+  st.out_of_range = wc.out_of_range;
+  st.no_normal = wc.no_normal;
+  st.min_points_per_frame = wc.min_pf;
+  st.max_points_per_frame = wc.max_pf;
+  st.seconds_points = wc.seconds_points;
+  st.seconds_filter = wc.seconds_filter;
+  st.latency_p50_s = percentile(wc.latencies, 0.5);
+  st.latency_p95_s = percentile(wc.latencies, 0.95);
+  st.peak_waiting_bytes = peak_waiting;
   st.seconds_total = seconds_since(start);
   return st;
 }

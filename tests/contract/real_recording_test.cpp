@@ -25,6 +25,7 @@
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/filter/robust_filter.h"
 #include "scanclean/pipeline/accumulate.h"
+#include "scanclean/pipeline/clean_window.h"
 #include "scanclean/pipeline/frame_to_points.h"
 #include "support/data_paths.h"
 
@@ -148,11 +149,11 @@ TEST(RealRecordingTest, AccumulatedCleanSurfaceHasLowerTemporalNoise) {
   };
   const double raw_med = median(raw_abs);
 
-  // Cleaned: all 12 frames accumulated and filtered.
-  FilterOptions fo;
-  fo.threads = 2;
-  fo.scale_gamma = 0;  // as replay and capture run it on depth frames (off)
-  const FilterResult r = accumulate_and_clean(cropped, info, {}, fo);
+  // Cleaned: all 12 frames fused and filtered by the program's window path (clean_window with
+  // the depth-frame preset, as replay and capture run it).
+  WindowOptions wo;
+  wo.filter.threads = 2;
+  const WindowResult r = clean_window(cropped, info, wo);
   ASSERT_GT(r.cloud.size(), t.pixels_valid_in_all / 2);  // merged, yet covers the surface
   double clean2 = 0;
   std::size_t clean_n = 0;
@@ -207,8 +208,8 @@ TEST(RealRecordingTest, AccumulatedCleanSurfaceHasLowerTemporalNoise) {
       W, H, t.pixels_valid_in_all, zsum / raw_n, 2.9 * (zsum / raw_n) * (zsum / raw_n),
       t.mean_std_m * 1e3, t.median_std_m * 1e3, raw_plane_rms * 1e3, raw_plane_med * 1e3,
       raw_res.size(), clean_plane_rms * 1e3, clean_plane_med * 1e3, clean_res.size(),
-      r.stats.points_in, r.stats.points_out, raw_plane_rms / clean_plane_rms,
-      raw_plane_med / clean_plane_med, r.stats.h * 1e3, r.stats.noise_sigma * 1e3, raw_rms * 1e3,
+      r.filter.points_in, r.filter.points_out, raw_plane_rms / clean_plane_rms,
+      raw_plane_med / clean_plane_med, r.filter.h * 1e3, r.filter.noise_sigma * 1e3, raw_rms * 1e3,
       raw_med * 1e3, clean_rms * 1e3, clean_med * 1e3);
   EXPECT_GT(raw_plane_rms, 0.001);  // the raw frames really are noisy
   EXPECT_LT(clean_plane_rms, 0.9 * raw_plane_rms);

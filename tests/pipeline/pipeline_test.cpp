@@ -9,6 +9,7 @@
 #include "pipeline_fixtures.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/pipeline/accumulate.h"
+#include "scanclean/pipeline/clean_window.h"
 
 namespace scanclean {
 namespace {
@@ -220,9 +221,9 @@ TEST(PipelineTest, BadOptionsAreRejected) {
   o.first_frame = 5;
   o.last_frame = 3;
   EXPECT_THROW(run_pipeline(src, o, {}), OptionError);
-  o = {};
-  o.filter.tau = 7;
-  EXPECT_THROW(run_pipeline(src, o, {}), OptionError);
+  PipelineOptions bad_filter;
+  bad_filter.filter.tau = 7;
+  EXPECT_THROW(run_pipeline(src, bad_filter, {}), OptionError);
 }
 
 // Accumulating noisy frames of a static plane and filtering them gives a surface much closer to
@@ -244,11 +245,11 @@ TEST(PipelineTest, AccumulationReducesNoiseDeterministically) {
     return std::sqrt(s / c.size());
   };
   const double single = rms_to_plane(frame_to_points(frames[0], info));
-  FilterOptions f;
-  f.threads = 1;
-  const FilterResult r1 = accumulate_and_clean(frames, info, {}, f);
-  f.threads = 2;
-  const FilterResult r2 = accumulate_and_clean(frames, info, {}, f);
+  WindowOptions w;  // the program's window path and depth-frame preset
+  w.filter.threads = 1;
+  const WindowResult r1 = clean_window(frames, info, w);
+  w.filter.threads = 2;
+  const WindowResult r2 = clean_window(frames, info, w);
   const double cleaned = rms_to_plane(r1.cloud);
   std::printf("plane rms: single frame %.3f mm, 8 frames cleaned %.3f mm (%zu points)\n",
               single * 1000, cleaned * 1000, r1.cloud.size());

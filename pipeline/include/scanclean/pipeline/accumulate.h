@@ -1,7 +1,8 @@
 #pragma once
 //! \file accumulate.h
-//! Multi-frame capture-and-clean of a static scene: several frames become one cloud, which the
-//! robust filter cleans; plus a per-pixel temporal-noise analysis for tests and reports.
+//! Multi-frame accumulation of a static scene: several frames become one cloud (appended or
+//! fused per pixel; clean_window.h cleans it), plus a per-pixel temporal-noise analysis for tests
+//! and reports.
 
 #include <cstddef>
 #include <optional>
@@ -38,14 +39,6 @@ struct FuseOptions {
 std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clouds,
                                              const FuseOptions& options = {},
                                              std::size_t* rejected = nullptr);
-
-//! frame_to_points on every frame, fused per pixel (fuse_static_clouds; with fuse = false or
-//! frames of different sizes: appended), then robust_filter (input normals = sensor normals,
-//! confidences = weights). Deterministic for any filter thread count.
-//! \throw as frame_to_points and robust_filter.
-FilterResult accumulate_and_clean(const std::vector<RangeFrame>& frames, const SourceInfo& info,
-                                  const FrameToPointsOptions& points_options = {},
-                                  const FilterOptions& filter_options = {}, bool fuse = true);
 
 //! Per-pixel temporal statistics of the depth (metres) over frames of one static view.
 struct TemporalSpread {

@@ -1,8 +1,17 @@
 #pragma once
 //! \file pipeline.h
 //! The capture-and-clean runner: pulls frames from any RangeSource (it never knows which),
-//! converts them to points, groups them in windows of N frames and cleans each window with the
-//! robust filter. Used by `scanclean replay` and `scanclean capture`.
+//! groups them in windows of N frames and cleans each window (clean_window.h). Used by
+//! `scanclean replay` and `scanclean capture`.
+//!
+//! Stages (a oneTBB flow graph, joined by queues): acquisition (acquire(), in the calling
+//! thread) only drains the source at its own rate and collects the frames of the current window
+//! (a recording decorator around the source writes every frame there); conversion + per-pixel
+//! fusion (window_input); the filter (clean_window_input); the output (on_window). Windows stay
+//! in order and the filter is deterministic, so outputs do not depend on thread counts.
+//! Complete windows wait for cleaning within memory_budget_bytes; beyond it, a device source's
+//! window is skipped for cleaning (counted and listed in PipelineStats::skipped; a recording
+//! still holds its frames), while a file source's acquisition waits (files never skip).
 
 #include <chrono>
 #include <cstddef>
@@ -14,6 +23,8 @@
 #include "scanclean/core/point_cloud.h"
 #include "scanclean/core/range_source.h"
 #include "scanclean/filter/robust_filter.h"
+#include "scanclean/pipeline/acquisition.h"
+#include "scanclean/pipeline/clean_window.h"
 #include "scanclean/pipeline/frame_to_points.h"
 
 namespace scanclean {
@@ -41,27 +52,35 @@ struct PipelineOptions {
   //! consistent samples, weighted by how many there are. false: every sample is a point.
   bool fuse = true;
   FrameToPointsOptions points;
-  FilterOptions filter;
+  FilterOptions filter = depth_frame_options();  //!< the depth-frame preset
+  //! Complete windows waiting to be cleaned (their raw frames, from the moment the window is
+  //! complete until its output is delivered) may hold at most this many bytes; a window that
+  //! would exceed it while others wait is skipped (device sources) or waited for (files). A
+  //! window alone is always accepted. > 0. Default 512 MiB: about 28 windows of 30 VGA frames.
+  std::size_t memory_budget_bytes = std::size_t{512} << 20;
+  //! Whether a window beyond the budget is skipped. kAuto: skip for device sources (SourceInfo
+  //! kind "openni2" or "vsensor", which pace themselves), wait for every other (file) source.
+  enum class Backlog { kAuto, kSkip, kWait } backlog = Backlog::kAuto;
   //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
   std::function<bool()> keep_going;
-  //! Called after each used frame (frames used so far). Optional.
+  //! Called after each used frame (frames used so far), from the calling thread. Optional.
   std::function<void(std::uint64_t)> on_frame;
+  //! Called when a window starts (true) or ends (false) its filter, from a worker thread, one
+  //! call at a time. Optional (progress displays).
+  std::function<void(std::size_t window, bool starts)> on_cleaning;
+  //! Called with a window just before it is fused and filtered (`frames` = its raw frames), from
+  //! a worker thread, one window at a time, in order. Optional (tests: a slow cleaning stage).
+  std::function<void(std::size_t window)> before_cleaning;
 };
+
+//! The window options (points, fusion, raw, filter) of the pipeline options.
+WindowOptions window_options(const PipelineOptions& options);
+//! The acquisition options (frame limit = last_frame, seconds, timeouts, reconnects,
+//! keep_going) of the pipeline options.
+AcquisitionOptions acquisition_options(const PipelineOptions& options);
 
 //! \throw OptionError naming the option (also validates points and, unless raw, filter).
 void validate(const PipelineOptions& options);
-
-//! Why run_pipeline stopped.
-enum class StopReason {
-  kEndOfStream,
-  kFrameLimit,
-  kTimeLimit,
-  kDisconnected,
-  kTimeouts,
-  kInterrupted,
-  kError
-};
-const char* to_string(StopReason reason);
 
 //! One output cloud: the frames [first, last] of the window (delivery positions).
 struct WindowOutput {
@@ -73,21 +92,18 @@ struct WindowOutput {
   FilterStats filter;   //!< zero when raw
 };
 
-struct PipelineStats {
-  std::uint64_t frames_read = 0;     //!< kOk frames delivered by the source (skipped ones too)
-  std::uint64_t frames_used = 0;     //!< frames in [first_frame, last_frame) converted
-  std::uint64_t dropped_frames = 0;  //!< missing source indices (sum of index gaps)
-  std::uint64_t gap_events = 0;      //!< places where the index jumped by more than 1
-  std::uint64_t timeouts = 0;
-  std::uint64_t disconnects = 0, reconnects = 0;
-  //! Frames lost across reconnects: the index gap when the device kept counting, else estimated
-  //! from the host-time gap and the mean frame period.
-  std::uint64_t reconnect_lost_frames = 0;
-  //! Source indices missing after the last delivered frame (end of stream of a source that
-  //! states its frame count); also included in dropped_frames.
-  std::uint64_t trailing_dropped_frames = 0;
-  bool reconnect_budget_exhausted = false;      //!< stopped: every reconnect attempt was used
-  std::uint64_t non_increasing_timestamps = 0;  //!< device timestamps that did not increase
+//! A window that was not cleaned because cleaning fell behind (memory budget).
+struct SkippedWindow {
+  std::size_t window = 0;
+  std::uint64_t first_frame = 0, last_frame = 0;  //!< delivery positions
+  std::uint64_t first_index = 0, last_index = 0;  //!< source frame indices
+};
+
+//! The acquisition's counts (frames_read, gaps, timeouts, reconnects, stop, ...) plus the
+//! windows'.
+struct PipelineStats : AcquisitionStats {
+  std::uint64_t frames_used = 0;     //!< frames in [first_frame, last_frame) put in windows
+  std::uint64_t frames_cleaned = 0;  //!< frames of the windows that were output
   std::size_t windows = 0;
   std::size_t points_in = 0;        //!< points from frame_to_points over all used frames
   std::size_t points_out = 0;       //!< points in all outputs
@@ -96,17 +112,21 @@ struct PipelineStats {
   std::size_t fusion_rejected = 0;  //!< samples the fusion dropped (off the pixel's median)
   std::size_t edge_dropped = 0, out_of_range = 0, no_normal = 0;
   std::size_t min_points_per_frame = 0, max_points_per_frame = 0;
-  double seconds_read = 0, seconds_points = 0, seconds_filter = 0, seconds_total = 0;
-  StopReason stop = StopReason::kEndOfStream;
-  std::string message;  //!< last_error() for kError / kDisconnected
-  SourceInfo info;      //!< the source's info after open()
+  double seconds_points = 0, seconds_filter = 0, seconds_total = 0;
+  std::vector<SkippedWindow> skipped;  //!< windows skipped for cleaning, in order
+  //! Latency from a frame's arrival (its delivery by next()) to its window's output (on_window
+  //! returned), over the frames of output windows: median and 95th percentile, seconds.
+  double latency_p50_s = 0, latency_p95_s = 0;
+  std::size_t peak_waiting_bytes = 0;  //!< most bytes of complete windows waiting at once
+  SourceInfo info;                     //!< the source's info after open()
 };
 
-//! Opens `source` (unless `already_open`), reads frames until the end of the stream, the frame
-//! range or time limit, a disconnect (after the reconnect attempts), too many timeouts,
-//! keep_going() == false or kError, and delivers each window to `on_window` in order (the
-//! last, possibly partial window too: nothing read is lost). Frames are processed in order and
-//! the filter is deterministic, so outputs do not depend on thread counts. Index gaps and
+//! Opens `source` (unless `already_open`), reads frames (acquire()) until the end of the
+//! stream, the frame range or time limit, a disconnect (after the reconnect attempts), too many
+//! timeouts, keep_going() == false or kError, and delivers each cleaned window to `on_window` in
+//! order (the last, possibly partial window too: it is never skipped), from a worker thread, one
+//! window at a time. Windows are numbered by position (window k holds positions first_frame +
+//! k N ..), skipped ones included, so a replay of a recording numbers them alike. Index gaps and
 //! timeouts are counted, never fatal. \throw OptionError (validate) and what open(),
 //! frame_to_points or robust_filter throw (InputError, UnavailableError, ...).
 PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
