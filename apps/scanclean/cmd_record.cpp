@@ -1,7 +1,8 @@
 // scanclean record: raw frames from any source to a crash-safe recording folder (format v1), or
 // to an .oni file through openni::Recorder (OpenNI2 device sources only).
 
-#if defined(SCANCLEAN_HAVE_SOURCES) && defined(SCANCLEAN_HAVE_REPLAY)
+#if defined(SCANCLEAN_HAVE_SOURCES) && defined(SCANCLEAN_HAVE_REPLAY) && \
+    defined(SCANCLEAN_HAVE_PIPELINE)
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -16,6 +17,7 @@
 #include "scanclean/core/progress.h"
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/interrupt.h"
+#include "scanclean/pipeline/acquisition.h"
 #include "scanclean/replay/recording_format.h"
 #include "scanclean/replay/recording_source.h"
 #include "scanclean/summary.h"
@@ -55,6 +57,43 @@ bool ends_with_oni(const std::string& s) {
   return e == ".oni";
 }
 
+// The one acquisition loop (acquire) over `source`, which records every frame it delivers.
+int record_frames(const RecordCommandOptions& c, RangeSource& source, const std::string& what,
+                  bool idle_ends) {
+  install_sigint_handler();
+  const auto start = Clock::now();
+  source.open();
+  const SourceInfo info = source.info();
+  for (const auto& w : info.warnings)
+    std::fprintf(stderr, "scanclean record: warning: %s\n", w.c_str());
+  std::unique_ptr<Progress> bar;
+  if (c.frames > 0) bar = std::make_unique<Progress>("record: frames", c.frames);
+  AcquisitionOptions ao;
+  ao.max_frames = c.frames;
+  ao.max_seconds = c.seconds;
+  ao.timeout = std::chrono::milliseconds(idle_ends ? 100 : 1000);
+  // A manual-paced virtual sensor at the end of its data never sends again: 5 s without a
+  // frame end its recording.
+  if (idle_ends) ao.max_consecutive_timeouts = 50;
+  ao.keep_going = [] { return !interrupted(); };
+  const AcquisitionStats st = acquire(source, ao, [&](RangeFrame&, std::uint64_t) {
+    if (bar) bar->advance();
+  });
+  if (bar) bar->finish();
+  source.close();  // finalizes the recording
+  Summary sum("scanclean record");
+  sum.add("source", info.uri + " (" + info.kind + ")");
+  sum.add("output", c.output + " (" + what + ")");
+  sum.add("stopped",
+          std::string(to_string(st.stop)) + (st.message.empty() ? "" : ": " + st.message));
+  sum.add_count("frames written", st.frames_read);
+  sum.add_count("dropped frames (index gaps)", st.dropped_frames);
+  sum.add_count("timeouts", st.timeouts);
+  sum.add("total", std::chrono::duration<double>(Clock::now() - start).count(), 2, "s");
+  sum.print();
+  return st.stop == StopReason::kInterrupted ? static_cast<int>(ExitCode::kInterrupted) : 0;
+}
+
 int record_to_oni(const RecordCommandOptions& c) {
 #ifdef SCANCLEAN_HAVE_OPENNI2
   if (c.source.rfind("openni2://", 0) != 0 && c.source.rfind("vsensor://", 0) != 0)
@@ -62,17 +101,8 @@ int record_to_oni(const RecordCommandOptions& c) {
         "record: an .oni output needs an OpenNI2 device source (openni2:// or "
         "vsensor://), got \"" +
         c.source + "\"; record other sources to a folder (an OUT without .oni)");
-  install_sigint_handler();
-  const auto start = Clock::now();
-  const std::size_t n =
-      record_oni(c.source, c.output, c.frames, c.seconds, [] { return !interrupted(); });
-  Summary sum("scanclean record");
-  sum.add("source", c.source);
-  sum.add("output", c.output + " (.oni, openni::Recorder)");
-  sum.add_count("frames written", n);
-  sum.add("total", std::chrono::duration<double>(Clock::now() - start).count(), 2, "s");
-  sum.print();
-  return interrupted() ? static_cast<int>(ExitCode::kInterrupted) : 0;
+  auto source = make_oni_recording_source(c.source, c.output);
+  return record_frames(c, *source, ".oni, openni::Recorder", c.source.rfind("vsensor://", 0) == 0);
 #else
   (void)c;
   throw UnavailableError("record: .oni output needs OpenNI2; built without SCANCLEAN_WITH_OPENNI2");
@@ -81,57 +111,7 @@ int record_to_oni(const RecordCommandOptions& c) {
 
 int record_to_folder(const RecordCommandOptions& c) {
   auto source = make_recording_source(make_range_source(c.source), c.output);
-  install_sigint_handler();
-  const auto start = Clock::now();
-  source->open();
-  const SourceInfo info = source->info();
-  for (const auto& w : info.warnings)
-    std::fprintf(stderr, "scanclean record: warning: %s\n", w.c_str());
-  std::unique_ptr<Progress> bar;
-  if (c.frames > 0) bar = std::make_unique<Progress>("record: frames", c.frames);
-  std::uint64_t written = 0, timeouts = 0, gaps = 0, last_index = 0;
-  std::string stop = "end of stream";
-  RangeFrame frame;
-  for (;;) {
-    if (interrupted()) {
-      stop = "interrupted";
-      break;
-    }
-    if (c.frames > 0 && written >= c.frames) {
-      stop = "frame count reached";
-      break;
-    }
-    if (c.seconds > 0 && std::chrono::duration<double>(Clock::now() - start).count() >= c.seconds) {
-      stop = "time limit";
-      break;
-    }
-    const ReadStatus s = source->next(frame, std::chrono::milliseconds(1000));
-    if (s == ReadStatus::kTimeout) {
-      ++timeouts;
-      continue;
-    }
-    if (s == ReadStatus::kEndOfStream) break;
-    if (s == ReadStatus::kDisconnected || s == ReadStatus::kError) {
-      stop = std::string(to_string(s)) + ": " + source->last_error();
-      break;
-    }
-    if (written > 0 && frame.index > last_index + 1) gaps += frame.index - last_index - 1;
-    last_index = frame.index;
-    ++written;
-    if (bar) bar->advance();
-  }
-  if (bar) bar->finish();
-  source->close();  // finalizes the recording
-  Summary sum("scanclean record");
-  sum.add("source", info.uri + " (" + info.kind + ")");
-  sum.add("output", c.output + " (recording folder v1)");
-  sum.add("stopped", stop);
-  sum.add_count("frames written", written);
-  sum.add_count("dropped frames (index gaps)", gaps);
-  sum.add_count("timeouts", timeouts);
-  sum.add("total", std::chrono::duration<double>(Clock::now() - start).count(), 2, "s");
-  sum.print();
-  return stop == "interrupted" ? static_cast<int>(ExitCode::kInterrupted) : 0;
+  return record_frames(c, *source, "recording folder v1", false);
 }
 
 const CommandRegistrar kRegistrar{{

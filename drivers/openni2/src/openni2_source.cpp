@@ -474,71 +474,82 @@ std::unique_ptr<RangeSource> make_openni2_source(const std::string& uri,
   return std::make_unique<OpenNI2Source>(uri, options);
 }
 
-std::size_t record_oni(const std::string& device_uri, const std::filesystem::path& out_oni,
-                       std::size_t max_frames, double max_seconds,
-                       const std::function<bool()>& keep_going) {
-  if (max_frames == 0 && !(max_seconds > 0) && !keep_going)
-    throw OptionError(
-        "record_oni: no stop condition (max_frames = 0, max_seconds <= 0 and no keep_going); "
-        "give at least one");
+namespace {
+
+// A device source whose depth stream is recorded by openni::Recorder while it is read.
+class OniRecordingSource final : public RangeSource {
+ public:
+  OniRecordingSource(std::string device_uri, std::filesystem::path out)
+      : uri_(std::move(device_uri)), out_(std::move(out)) {}
+  ~OniRecordingSource() override { close(); }
+
+  void open() override {
+    if (source_) throw UnavailableError("record_oni: the .oni recording source cannot reconnect");
+    OpenNI2Options options;
+    options.disconnect_timeouts = 0;  // recording ends on the disconnect callback or end of data
+    source_ = std::make_unique<OpenNI2Source>(uri_, options);
+    source_->open_device(/*start=*/false);
+    // Check the output first: when oniCreateRecorder fails, Debian's libOpenNI2 frees the
+    // recorder but leaves the handle pointing at it, and Recorder::destroy() then crashes.
+    {
+      std::FILE* probe = std::fopen(out_.c_str(), "wb");
+      if (probe == nullptr) {
+        const int err = errno;
+        source_.reset();
+        throw IoError(out_.string() + ": cannot create the .oni file: " + std::strerror(err));
+      }
+      std::fclose(probe);
+    }
+    auto recorder = std::make_unique<openni::Recorder>();
+    if (recorder->create(out_.c_str()) != openni::STATUS_OK) {
+      const std::string e = extended_error();
+      recorder.release();  // deliberately leaked: destroying it would crash (see above)
+      source_.reset();
+      throw IoError(out_.string() + ": cannot create the .oni file: " + e);
+    }
+    recorder_ = std::move(recorder);
+    if (recorder_->attach(source_->stream(), /*allowLossyCompression=*/false) != openni::STATUS_OK)
+      throw UnavailableError("record_oni: cannot attach the depth stream: " + extended_error());
+    if (recorder_->start() != openni::STATUS_OK)
+      throw IoError(out_.string() + ": cannot start recording: " + extended_error());
+    // Recorder::start() only posts a message to the recorder thread: give it time before frames
+    // arrive, or the first frames are dropped (docs/SENSORS.md §3).
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    source_->start_stream();
+  }
+  ReadStatus next(RangeFrame& frame, std::chrono::milliseconds timeout) override {
+    if (!source_) return ReadStatus::kEndOfStream;
+    return source_->next(frame, timeout);
+  }
+  SourceInfo info() const override {
+    SourceInfo i = source_ ? source_->info() : SourceInfo{};
+    return i;
+  }
+  void close() override {
+    if (recorder_) {
+      recorder_->stop();
+      recorder_->destroy();
+      recorder_.reset();
+    }
+    if (source_) source_->close();
+  }
+  std::string last_error() const override { return source_ ? source_->last_error() : ""; }
+
+ private:
+  std::string uri_;
+  std::filesystem::path out_;
+  std::unique_ptr<OpenNI2Source> source_;
+  std::unique_ptr<openni::Recorder> recorder_;
+};
+
+}  // namespace
+
+std::unique_ptr<RangeSource> make_oni_recording_source(const std::string& device_uri,
+                                                       const std::filesystem::path& out_oni) {
   if (!starts_with(device_uri, "openni2://") && !starts_with(device_uri, "vsensor://"))
     throw OptionError("record_oni: device URI must start with openni2:// or vsensor://, got '" +
                       device_uri + "'");
-  OpenNI2Options options;
-  options.disconnect_timeouts = 0;  // recording ends on the disconnect callback or end of data
-  OpenNI2Source source(device_uri, options);
-  source.open_device(/*start=*/false);
-
-  // Check the output first: when oniCreateRecorder fails, Debian's libOpenNI2 frees the
-  // recorder but leaves the handle pointing at it, and Recorder::destroy() then crashes.
-  {
-    std::FILE* probe = std::fopen(out_oni.c_str(), "wb");
-    if (probe == nullptr)
-      throw IoError(out_oni.string() + ": cannot create the .oni file: " + std::strerror(errno));
-    std::fclose(probe);
-  }
-  auto recorder_owner = std::make_unique<openni::Recorder>();
-  if (recorder_owner->create(out_oni.c_str()) != openni::STATUS_OK) {
-    const std::string e = extended_error();
-    recorder_owner.release();  // deliberately leaked: destroying it would crash (see above)
-    throw IoError(out_oni.string() + ": cannot create the .oni file: " + e);
-  }
-  openni::Recorder& recorder = *recorder_owner;
-  if (recorder.attach(source.stream(), /*allowLossyCompression=*/false) != openni::STATUS_OK)
-    throw UnavailableError("record_oni: cannot attach the depth stream: " + extended_error());
-  if (recorder.start() != openni::STATUS_OK)
-    throw IoError(out_oni.string() + ": cannot start recording: " + extended_error());
-  // Recorder::start() only posts a message to the recorder thread: give it time before frames
-  // arrive, or the first frames are dropped (docs/SENSORS.md §3).
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  source.start_stream();
-
-  const auto t0 = std::chrono::steady_clock::now();
-  std::size_t frames = 0;
-  RangeFrame frame;
-  int idle = 0;
-  while (max_frames == 0 || frames < max_frames) {
-    if (keep_going && !keep_going()) break;
-    if (max_seconds > 0 &&
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() >= max_seconds)
-      break;
-    const ReadStatus s = source.next(frame, std::chrono::milliseconds(100));
-    if (s == ReadStatus::kOk) {
-      ++frames;
-      idle = 0;
-      continue;
-    }
-    if (s == ReadStatus::kTimeout) {
-      // A manual-paced virtual sensor at the end of its data never sends again.
-      if (++idle >= 50 && frames > 0 && device_uri.rfind("vsensor://", 0) == 0) break;
-      continue;
-    }
-    break;  // end of stream, disconnect, error
-  }
-  recorder.stop();
-  recorder.destroy();
-  source.close();
-  return frames;
+  return std::make_unique<OniRecordingSource>(device_uri, out_oni);
 }
 
 OpenNI2DeviceList list_openni2_devices() {

@@ -14,6 +14,7 @@
 #include "openni2_fixtures.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/drivers/openni2_source.h"
+#include "scanclean/pipeline/acquisition.h"
 #include "support/data_paths.h"
 
 namespace scanclean {
@@ -22,6 +23,22 @@ namespace {
 using namespace std::chrono_literals;
 using test::vs_mismatches;
 using test::write_vs_fixture;
+
+// Records through make_oni_recording_source with the program's acquisition loop, as `scanclean
+// record OUT.oni` does (a manual-paced virtual sensor ends after 5 s without a frame).
+std::size_t record_oni(const std::string& uri, const std::filesystem::path& oni,
+                       std::uint64_t max_frames, double max_seconds) {
+  auto src = make_oni_recording_source(uri, oni);
+  src->open();
+  AcquisitionOptions ao;
+  ao.max_frames = max_frames;
+  ao.max_seconds = max_seconds;
+  ao.timeout = 100ms;
+  ao.max_consecutive_timeouts = 50;
+  const AcquisitionStats st = acquire(*src, ao, {});
+  src->close();
+  return st.frames_read;
+}
 
 std::unique_ptr<RangeSource> open_source(const std::string& uri, OpenNI2Options o = {}) {
   auto s = make_openni2_source(uri, o);
@@ -179,8 +196,7 @@ TEST(OpenNI2SourceTest, RecordOniThenPlayBackBitExact) {
     const auto dir = test::make_temp_dir("oni");
     const auto fx = write_vs_fixture(dir / "rec", 8, 160, 120, unit, /*ps1080=*/true);
     const auto oni = dir / "x.oni";
-    const std::size_t written =
-        record_oni("vsensor://" + fx.folder.string(), oni, 0, 0, [] { return true; });
+    const std::size_t written = record_oni("vsensor://" + fx.folder.string(), oni, 0, 0);
     EXPECT_EQ(written, 8u);
     ASSERT_TRUE(std::filesystem::exists(oni));
 
@@ -213,12 +229,12 @@ TEST(OpenNI2SourceTest, RecordOniStopsAtMaxFrames) {
   const auto dir = test::make_temp_dir("oni");
   const auto fx = write_vs_fixture(dir / "rec", 6);
   const auto oni = dir / "y.oni";
-  EXPECT_EQ(record_oni("vsensor://" + fx.folder.string(), oni, 4, 0, {}), 4u);
+  EXPECT_EQ(record_oni("vsensor://" + fx.folder.string(), oni, 4, 0), 4u);
   auto src = open_source(oni.string());
   EXPECT_EQ(src->info().frame_count.value_or(0), 4u);
-  EXPECT_THROW(record_oni("vsensor://" + fx.folder.string(), dir / "z.oni", 0, 0, {}), OptionError);
+  EXPECT_THROW(make_oni_recording_source("file.oni", dir / "z.oni"), OptionError);
   try {
-    record_oni("vsensor://" + fx.folder.string(), dir / "no" / "such" / "dir.oni", 2, 0, {});
+    record_oni("vsensor://" + fx.folder.string(), dir / "no" / "such" / "dir.oni", 2, 0);
     FAIL() << "expected IoError";
   } catch (const IoError& e) {
     EXPECT_NE(std::string(e.what()).find("dir.oni"), std::string::npos) << e.what();
@@ -350,7 +366,7 @@ TEST(OpenNI2SourceTest, KilledOniRecordingIsReadableUpToItsLastFrame) {
   ASSERT_GE(child, 0);
   if (child == 0) {
     try {
-      record_oni("vsensor://" + fx.folder.string() + "?pace=realtime&loop=1", oni, 0, 30.0, {});
+      record_oni("vsensor://" + fx.folder.string() + "?pace=realtime&loop=1", oni, 0, 30.0);
     } catch (...) {
     }
     _exit(0);

@@ -55,21 +55,22 @@ void validate(const OpenNI2Options& options);
 std::unique_ptr<RangeSource> make_openni2_source(const std::string& uri,
                                                  const OpenNI2Options& options = {});
 
-//! Records depth from a live or virtual device (`device_uri` as for make_openni2_source, e.g.
-//! "openni2://", "vsensor://...") to `out_oni` with openni::Recorder (lossless), starting the
-//! recorder ~100 ms before the stream so the first frames are kept. Stops after `max_frames`
-//! frames (0 = no limit), `max_seconds` seconds (<= 0 = no limit), when keep_going() returns
-//! false (may be empty), or when the device ends/disconnects. Returns the number of frames
-//! written. The .oni is written in place by OpenNI (not atomically). Measured with Debian's
-//! libOniFile: a recorder killed with SIGKILL leaves a file without a frame count that still
-//! plays back, bit-exact, up to its last written frame (make_openni2_source then reports an
-//! unknown frame_count); the recording folder format (replay module) remains the crash-safe
-//! capture path with a documented guarantee. \throw UnavailableError, OptionError (max_frames ==
-//! 0 and max_seconds <= 0 and no keep_going, or a URI that is not openni2:// or vsensor://),
-//! IoError (the file cannot be created; checked before OpenNI touches it).
-std::size_t record_oni(const std::string& device_uri, const std::filesystem::path& out_oni,
-                       std::size_t max_frames, double max_seconds,
-                       const std::function<bool()>& keep_going);
+//! A source that records depth from a live or virtual device (`device_uri` as for
+//! make_openni2_source, e.g. "openni2://", "vsensor://...") to `out_oni` with openni::Recorder
+//! (lossless) while it is read: open() opens the device, checks and creates the file, starts the
+//! recorder ~100 ms before the stream so the first frames are kept; next() delivers the frames
+//! (no disconnect by timeouts: the recording ends on the disconnect callback or at the end of
+//! the data); close() (or destruction) stops the recorder. It cannot reconnect (open() a second
+//! time throws UnavailableError). Read it with acquire() (pipeline/acquisition.h), which holds
+//! the stop rules. The .oni is written in place by OpenNI (not atomically). Measured with
+//! Debian's libOniFile: a recorder killed with SIGKILL leaves a file without a frame count that
+//! still plays back, bit-exact, up to its last written frame (make_openni2_source then reports
+//! an unknown frame_count); the recording folder format (replay module) remains the crash-safe
+//! capture path with a documented guarantee. \throw OptionError (a URI that is not openni2:// or
+//! vsensor://); open() throws UnavailableError and IoError (the file cannot be created; checked
+//! before OpenNI touches it).
+std::unique_ptr<RangeSource> make_oni_recording_source(const std::string& device_uri,
+                                                       const std::filesystem::path& out_oni);
 
 //! One device as OpenNI2 lists it.
 struct OpenNI2DeviceEntry {
