@@ -213,8 +213,10 @@ TEST(RealRecordingTest, AccumulatedCleanSurfaceHasLowerTemporalNoise) {
       raw_med * 1e3, clean_rms * 1e3, clean_med * 1e3);
   EXPECT_GT(raw_plane_rms, 0.001);  // the raw frames really are noisy
   EXPECT_LT(clean_plane_rms, 0.9 * raw_plane_rms);
-  EXPECT_LT(clean_plane_med, 0.5 * raw_plane_med);  // measured 2.38 -> 0.99 mm
-  // RMS measured 3.99 -> 3.02 mm: the tails are level flips of the 43 mm quantisation step.
+  // Measured (clean_window, depth fused per pixel, depth-frame preset): plane-fit residual RMS
+  // 3.99 -> 2.24 mm, median 2.38 -> 1.13 mm; deviation from the per-pixel mean RMS 56.2 -> 3.6
+  // mm (the raw tails are level flips of the 43 mm quantisation step), median 4.42 -> 1.95 mm.
+  EXPECT_LT(clean_plane_med, 0.5 * raw_plane_med);
   EXPECT_LT(clean_rms, 0.6 * raw_rms);  // against the per-pixel mean: RMS (outlier jumps) falls
 }
 #endif

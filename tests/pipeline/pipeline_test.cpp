@@ -254,7 +254,7 @@ TEST(PipelineTest, AccumulationReducesNoiseDeterministically) {
   std::printf("plane rms: single frame %.3f mm, 8 frames cleaned %.3f mm (%zu points)\n",
               single * 1000, cleaned * 1000, r1.cloud.size());
   EXPECT_GT(single, 0.002);
-  EXPECT_LT(cleaned, single / 2);  // measured 2.88 -> 1.18 mm
+  EXPECT_LT(cleaned, single / 2);  // measured 2.88 -> 0.24 mm
   ASSERT_EQ(r1.cloud.size(), r2.cloud.size());
   EXPECT_EQ(r1.cloud.positions, r2.cloud.positions);
   // Temporal spread of the raw frames is the injected noise.

@@ -25,6 +25,11 @@ struct WindowOptions {
   //! Fuse the window's frames per pixel before filtering (one static view, as accumulation
   //! assumes); false, or frames of different sizes: every sample is a point.
   bool fuse = true;
+  //! Fuse the depth images per pixel (the same rule) and convert the fused depth once, instead
+  //! of converting every frame and fusing the clouds: normals and flying pixels come from the
+  //! fused depth. Frames with a points image or sensor normals, or of different sizes or
+  //! intrinsics, are fused as clouds.
+  bool fuse_depth = true;
   FuseOptions fusion;
   bool raw = false;  //!< no filter: the window's points (appended, not fused) are the output
   FilterOptions filter = depth_frame_options();  //!< the depth-frame preset
