@@ -6,6 +6,7 @@
 #include "scanclean/clean_job.h"
 
 #include <cctype>
+#include <chrono>
 #include <cstdio>
 #include <memory>
 #include <vector>
@@ -31,6 +32,7 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
     double min_depth = 0, max_depth = 0;
     bool no_weights = false;
     bool no_fuse = false;
+    double memory_budget_mib = 512;
   };
   auto v = std::make_shared<Values>();
   cmd.add_option("--accumulate", v->accumulate,
@@ -64,7 +66,15 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
   cmd.add_flag("--no-weights", v->no_weights,
                "Do not weight points by the sensor noise model (Nguyen 2012 + PS1080 "
                "quantisation for PrimeSense-class sensors)");
+  cmd.add_option("--memory-budget", v->memory_budget_mib,
+                 "MiB of complete windows (their raw frames) that may wait for cleaning; beyond "
+                 "it a live sensor's window is skipped for cleaning (counted and named in the "
+                 "summary; --record keeps its frames), while a file source waits (files never "
+                 "skip)")
+      ->check(positive_number())
+      ->capture_default_str();
   return [v, filter](PipelineOptions& o) {
+    o.memory_budget_bytes = static_cast<std::size_t>(v->memory_budget_mib * 1048576.0);
     o.accumulate = static_cast<std::size_t>(v->accumulate);
     o.raw = v->raw;
     o.fuse = !v->no_fuse;
@@ -175,8 +185,12 @@ std::string seconds_text(double s) {
 }  // namespace
 
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
-                  const std::filesystem::path& output, const std::filesystem::path& outliers) {
+                  const std::filesystem::path& output, const std::filesystem::path& outliers,
+                  const LiveOutputs& live) {
   check_clean_outputs(command, options, {}, output, outliers);
+  if (!live.latest.empty())
+    check_output_files(command, {},
+                       {{"-o", output}, {"--outliers", outliers}, {"--latest", live.latest}});
   validate(options);
   install_sigint_handler();
   options.keep_going = [] { return !interrupted(); };
@@ -191,11 +205,17 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   if (options.last_frame > 0 && (expected == 0 || options.last_frame < expected))
     expected = options.last_frame;
   if (expected > options.first_frame) expected -= options.first_frame;
+  // One bar over reading and cleaning: a frame counts once when read and once when its window
+  // is cleaned (or skipped), so the bar moves while the filter runs.
   std::unique_ptr<Progress> bar;
-  if (expected > 0) bar = std::make_unique<Progress>(command + ": frames", expected);
+  if (expected > 0)
+    bar = std::make_unique<Progress>(command + ": frames read + cleaned", 2 * expected);
   options.on_frame = [&](std::uint64_t) {
     if (bar) bar->advance();
   };
+  const bool status_lines = !bar && Progress::enabled();  // live: one line per cleaned window
+  FilterStats phase_sum;                                  // filter phase times summed over windows
+
   std::vector<std::filesystem::path> written;
   std::vector<std::string> collapsed;  // windows not written: empty or one point
   std::size_t windows_seen = 0;
@@ -217,9 +237,25 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     both.commit();
     written.push_back(p);
   };
+  const auto t_start = std::chrono::steady_clock::now();
   const PipelineStats st = run_pipeline(
       source, options,
       [&](WindowOutput&& w) {
+        if (bar) bar->advance(w.frames);
+        phase_sum.seconds_scale += w.filter.seconds_scale;
+        phase_sum.seconds_kernels += w.filter.seconds_kernels;
+        phase_sum.seconds_projection += w.filter.seconds_projection;
+        phase_sum.seconds_clustering += w.filter.seconds_clustering;
+        phase_sum.seconds_outliers += w.filter.seconds_outliers;
+        phase_sum.seconds_total += w.filter.seconds_total;
+        if (!live.latest.empty() && !w.cloud.empty()) write_point_cloud(live.latest, w.cloud);
+        if (status_lines)
+          std::fprintf(
+              stderr,
+              "scanclean %s: window %zu cleaned (frames %llu..%llu, %zu points) at %.1f s\n",
+              command.c_str(), w.window, static_cast<unsigned long long>(w.first_frame),
+              static_cast<unsigned long long>(w.last_frame), w.cloud.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count());
         ++windows_seen;
         if (single) {
           write_window(w, false);
@@ -233,7 +269,10 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
       },
       true);
   for (auto& p : pending) write_window(p, false);
-  if (bar) bar->finish();
+  if (bar) {
+    for (const auto& k : st.skipped) bar->advance(k.last_frame - k.first_frame + 1);
+    bar->finish();
+  }
   source.close();
 
   Summary sum("scanclean " + command);
@@ -241,8 +280,25 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
           info.uri + " (" + info.kind + (info.name.empty() ? "" : ", " + info.name) + ")");
   if (!info.warnings.empty()) sum.add_count("source warnings", info.warnings.size());
   sum.add("stopped", to_string(st.stop) + (st.message.empty() ? "" : ": " + st.message));
-  sum.add_count("frames read", st.frames_read);
+  sum.add_count("frames delivered", st.frames_read);
+  if (!live.record.empty())
+    sum.add("frames recorded", with_thousands(st.frames_read) + " (every delivered frame, in " +
+                                   live.record.string() + ")");
   sum.add_count("frames used", st.frames_used);
+  if (!options.raw) sum.add_count("frames cleaned", st.frames_cleaned);
+  {
+    std::string names;
+    for (std::size_t i = 0; i < st.skipped.size() && i < 8; ++i)
+      names += (i ? ", " : ": ") + std::to_string(st.skipped[i].window) + " (frames " +
+               std::to_string(st.skipped[i].first_frame) + ".." +
+               std::to_string(st.skipped[i].last_frame) + ")";
+    if (st.skipped.size() > 8) names += ", ...";
+    sum.add("windows skipped", with_thousands(st.skipped.size()) +
+                                   (st.skipped.empty() ? std::string()
+                                                       : names + " (cleaning fell behind; "
+                                                                 "replay the recording to clean "
+                                                                 "them)"));
+  }
   sum.add("dropped frames (index gaps)",
           with_thousands(st.dropped_frames) + " in " + with_thousands(st.gap_events) + " gaps" +
               (st.trailing_dropped_frames > 0
@@ -270,6 +326,15 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   sum.add("time", "read " + seconds_text(st.seconds_read) + ", points " +
                       seconds_text(st.seconds_points) + ", filter " +
                       seconds_text(st.seconds_filter));
+  if (!options.raw && st.windows > 0)
+    sum.add("filter phases", "scale " + seconds_text(phase_sum.seconds_scale) + ", kernels " +
+                                 seconds_text(phase_sum.seconds_kernels) + ", projection " +
+                                 seconds_text(phase_sum.seconds_projection) + ", clustering " +
+                                 seconds_text(phase_sum.seconds_clustering) + ", outliers " +
+                                 seconds_text(phase_sum.seconds_outliers));
+  if (st.windows > 0)
+    sum.add("latency (frame -> window)",
+            "p50 " + seconds_text(st.latency_p50_s) + ", p95 " + seconds_text(st.latency_p95_s));
   sum.add("total", st.seconds_total, 2, "s");
   if (written.empty()) {
     sum.add("output", collapsed.empty() ? "none (no frames)" : "none");

@@ -37,6 +37,13 @@ void check_clean_outputs(const std::string& command, const PipelineOptions& opti
                          const std::filesystem::path& input, const std::filesystem::path& output,
                          const std::filesystem::path& outliers);
 
+//! What a live run adds to the job: the latest cleaned window at a fixed path, and the
+//! recording folder (for the summary).
+struct LiveOutputs {
+  std::filesystem::path latest;  //!< rewritten atomically after every cleaned window ("" = none)
+  std::filesystem::path record;  //!< the --record folder, if any (every delivered frame is in it)
+};
+
 //! Runs the job on `source` (not yet opened) and writes the outputs (the clean cloud and the
 //! outliers of a window are committed together or not at all). Returns the exit code: 0; 130
 //! after SIGINT (what was captured is written); 3 on a source error or when no frame was read;
@@ -44,6 +51,7 @@ void check_clean_outputs(const std::string& command, const PipelineOptions& opti
 //! 6 when a window's result is empty or collapsed to one point although its input was not
 //! (that window is not written).
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
-                  const std::filesystem::path& output, const std::filesystem::path& outliers);
+                  const std::filesystem::path& output, const std::filesystem::path& outliers,
+                  const LiveOutputs& live = {});
 
 }  // namespace scanclean::app

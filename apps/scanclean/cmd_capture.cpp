@@ -27,6 +27,7 @@ struct CaptureCommandOptions {
   std::string output;
   std::string outliers;
   std::string record;
+  std::string latest;
   std::uint64_t frames = 0;
   double seconds = 0;
   int reconnect = 0;
@@ -46,7 +47,10 @@ int run_capture(const CaptureCommandOptions& c, const std::function<void(Pipelin
   check_clean_outputs("capture", o, c.source, c.output, c.outliers);
   std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
   if (!c.record.empty()) source = make_recording_source(std::move(source), c.record);
-  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers);
+  LiveOutputs live;
+  live.latest = c.latest;
+  live.record = c.record;
+  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers, live);
   source.reset();  // finishes the recording folder (if any)
   if (!c.record.empty())
     std::fprintf(stderr, "scanclean capture: raw frames recorded in %s\n", c.record.c_str());
@@ -71,6 +75,9 @@ const CommandRegistrar kRegistrar{{
       cmd.add_option("--record", c->record,
                      "Also record the raw frames to this recording folder (format v1, crash-safe; "
                      "replay it later with scanclean replay)");
+      cmd.add_option("--latest", c->latest,
+                     "Keep the latest cleaned window at this path (.ply .pcd .xyz), rewritten "
+                     "atomically after every window, so that a viewer can reload it");
       auto* f =
           cmd.add_option("--frames", c->frames, "Stop after N frames")->check(positive_number());
       auto* s =
@@ -86,7 +93,10 @@ const CommandRegistrar kRegistrar{{
       cmd.add_flag("--depth-100um", c->depth_100um, "Live sensors: 0.1 mm depth units");
       cmd.footer(
           "Stops at the end of a finite source, after --frames/--seconds, on a disconnect, or on "
-          "Ctrl-C (exit 130; what was captured is filtered and written). With no sensor: "
+          "Ctrl-C (exit 130; what was captured is filtered and written). Reading never waits "
+          "for the filter: windows queue for cleaning up to --memory-budget; beyond it a live "
+          "sensor's window is skipped for cleaning (named in the summary) but still recorded "
+          "with --record. With no sensor: "
           "\"no depth sensor found; run scanclean devices\", exit 5.\n"
           "A device that keeps disconnecting until the --reconnect budget is used up: exit 5.\n"
           "Exit codes: 0 ok, 1 internal error, 2 bad command line or option, 3 bad input data,\n"
