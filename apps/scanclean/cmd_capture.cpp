@@ -16,7 +16,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/pipeline/pipeline.h"
-#include "scanclean/replay/recording_source.h"
+#include "scanclean/replay/frame_recorder.h"
 
 namespace scanclean::app {
 
@@ -46,12 +46,28 @@ int run_capture(const CaptureCommandOptions& c, const std::function<void(Pipelin
   intrinsics(c.source, so);
   check_clean_outputs("capture", o, c.source, c.output, c.outliers);
   std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
-  if (!c.record.empty()) source = make_recording_source(std::move(source), c.record);
+  // The recording is a stage of its own (the pipeline hands it every frame it reads), so that
+  // reading the sensor never waits for the disk.
+  std::unique_ptr<FrameRecorder> recorder;
+  if (!c.record.empty()) {
+    std::error_code ec;
+    const std::filesystem::path rec(c.record);
+    if (std::filesystem::exists(rec / "session.json", ec) ||
+        std::filesystem::exists(rec / "frames.csv", ec))
+      throw IoError(c.record +
+                    ": already holds a recording (session.json or frames.csv); refusing to "
+                    "overwrite it (give --record a new folder)");
+    recorder = std::make_unique<FrameRecorder>(c.record);
+    o.record = [&recorder](const SourceInfo& info, const RangeFrame& f) {
+      recorder->write(info, f);
+    };
+  }
   LiveOutputs live;
   live.latest = c.latest;
   live.record = c.record;
   const int rc = run_clean_job("capture", *source, o, c.output, c.outliers, live);
-  source.reset();  // finishes the recording folder (if any)
+  source.reset();
+  if (recorder) recorder->finish();
   if (!c.record.empty())
     std::fprintf(stderr, "scanclean capture: raw frames recorded in %s\n", c.record.c_str());
   return rc;

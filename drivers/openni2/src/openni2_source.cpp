@@ -22,6 +22,8 @@
 #include <mutex>
 #include <thread>
 
+#include <tbb/concurrent_queue.h>
+
 #include "scanclean/core/errors.h"
 
 namespace scanclean {
@@ -120,6 +122,47 @@ class DisconnectFlag final : public openni::OpenNI::DeviceDisconnectedListener {
   bool fired_ = false;
 };
 
+// One frame read by the listener, converted in the driver's thread.
+struct HeldFrame {
+  ReadStatus status = ReadStatus::kOk;
+  RangeFrame frame;
+  std::string error;
+};
+
+// Converts a depth frame (copy). Returns kOk or kError with `error` set.
+ReadStatus convert_frame(const openni::VideoFrameRef& ref, const Intrinsics& K, float hfov,
+                         float vfov, RangeFrame& frame, std::string& error);
+
+// Receives every frame a real-time device emits, in the driver's thread, and keeps it until
+// next() takes it: OpenNI2's stream holds only the newest frame, so a reader that is late by a
+// frame period (a busy machine) would lose frames otherwise.
+class FrameListener final : public openni::VideoStream::NewFrameListener {
+ public:
+  void set_camera(const Intrinsics& K, float hfov, float vfov) {
+    K_ = K;
+    hfov_ = hfov;
+    vfov_ = vfov;
+  }
+  void onNewFrame(openni::VideoStream& stream) override {
+    openni::VideoFrameRef ref;
+    HeldFrame held;
+    if (stream.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) {
+      held.status = ReadStatus::kError;
+      held.error = "readFrame failed: " + extended_error();
+    } else {
+      held.status = convert_frame(ref, K_, hfov_, vfov_, held.frame, held.error);
+    }
+    frames_.push(std::move(held));
+  }
+  bool try_pop(HeldFrame& out) { return frames_.try_pop(out); }
+  void clear() { frames_.clear(); }
+
+ private:
+  Intrinsics K_;
+  float hfov_ = 0, vfov_ = 0;
+  tbb::concurrent_queue<HeldFrame> frames_;
+};
+
 class OpenNI2Source final : public RangeSource {
  public:
   OpenNI2Source(std::string uri, OpenNI2Options options) : uri_(std::move(uri)), options_(options) {
@@ -132,6 +175,11 @@ class OpenNI2Source final : public RangeSource {
   // Opens device and stream; starts the stream only when `start` (record_oni starts it later).
   void open_device(bool start);
   void start_stream() {
+    if (use_listener_) {
+      listener_.clear();
+      listener_.set_camera(info_.K, hfov_, vfov_);
+      if (stream_.addNewFrameListener(&listener_) == openni::STATUS_OK) frame_listening_ = true;
+    }
     if (stream_.start() != openni::STATUS_OK) {
       const std::string e = extended_error();
       close();
@@ -165,6 +213,10 @@ class OpenNI2Source final : public RangeSource {
   bool end_of_stream_ = false, disconnected_ = false;
   std::string last_error_;
   float hfov_ = 0, vfov_ = 0;
+  bool use_listener_ = false;     // real-time devices: frames kept by listener_
+  bool frame_listening_ = false;  // listener_ is attached to stream_
+  FrameListener listener_;
+  ReadStatus timed_out(bool gone);
 };
 
 void OpenNI2Source::open_device(bool start) {
@@ -280,6 +332,10 @@ void OpenNI2Source::open_device(bool start) {
       listening_ = true;
   }
   fill_info();
+  // Devices that emit frames on their own clock (live sensors, the real-time virtual sensor);
+  // files and the manual-paced virtual sensor emit a frame per wait and keep nothing to lose.
+  use_listener_ =
+      !is_file_ && (kind_ == "openni2" || uri_.find("pace=realtime") != std::string::npos);
   if (start) start_stream();
 }
 
@@ -333,72 +389,8 @@ void OpenNI2Source::fill_info() {
   info_ = info;
 }
 
-ReadStatus OpenNI2Source::next(RangeFrame& frame, std::chrono::milliseconds timeout) {
-  if (!stream_.isValid()) {
-    last_error_ = "source '" + uri_ + "' is not open";
-    return ReadStatus::kError;
-  }
-  if (end_of_stream_) return ReadStatus::kEndOfStream;
-  if (disconnected_) return ReadStatus::kDisconnected;
-  const bool gone = listening_ && disconnect_.fired();
-  // After a disconnect only frames already delivered by the driver are read (no waiting).
-  int wait_ms = gone ? 0 : static_cast<int>(std::clamp<long long>(timeout.count(), 0, 1 << 30));
-  // All announced frames delivered: a short wait confirms the end (manual pace produces any
-  // further frame at once).
-  if (frame_count_ && delivered_ >= *frame_count_) wait_ms = std::min(wait_ms, 50);
-  openni::VideoStream* streams[] = {&stream_};
-  int ready = -1;
-  const openni::Status rc = openni::OpenNI::waitForAnyStream(streams, 1, &ready, wait_ms);
-  if (rc == openni::STATUS_TIME_OUT) {
-    ++consecutive_timeouts_;
-    if (gone || (listening_ && disconnect_.fired())) {
-      disconnected_ = true;
-      last_error_ = "device '" + std::string(device_.getDeviceInfo().getUri()) +
-                    "' disconnected after " + std::to_string(delivered_) +
-                    " frames; close() and open() to reconnect";
-      return ReadStatus::kDisconnected;
-    }
-    if (frame_count_ && delivered_ >= *frame_count_) {
-      end_of_stream_ = true;
-      return ReadStatus::kEndOfStream;
-    }
-    int finished = 0;
-    if (virtual_device_ &&
-        stream_.getProperty(kVsensorPropertyFinished, &finished) == openni::STATUS_OK &&
-        finished == 1) {
-      // A real-time virtual sensor emitted its last frame (frames a slow reader missed show as
-      // index gaps, as with a real sensor).
-      end_of_stream_ = true;
-      return ReadStatus::kEndOfStream;
-    }
-    if (is_file_ && consecutive_timeouts_ >= 3) {
-      // Three waits in a row without a frame in manual mode: the player has nothing left (a
-      // recording without a frame count, e.g. from a killed recorder, or a truncated file).
-      end_of_stream_ = true;
-      last_error_ = "the .oni player delivered " + std::to_string(delivered_) + " frames " +
-                    (frame_count_ ? "of " + std::to_string(*frame_count_)
-                                  : std::string("(the file header has no frame count)"));
-      return ReadStatus::kEndOfStream;
-    }
-    if (!is_file_ && options_.disconnect_timeouts > 0 &&
-        consecutive_timeouts_ >= options_.disconnect_timeouts) {
-      disconnected_ = true;
-      last_error_ = "no frame from '" + uri_ + "' in " + std::to_string(consecutive_timeouts_) +
-                    " consecutive waits; treating the device as disconnected";
-      return ReadStatus::kDisconnected;
-    }
-    return ReadStatus::kTimeout;
-  }
-  if (rc != openni::STATUS_OK) {
-    last_error_ = "waitForAnyStream failed: " + extended_error();
-    return ReadStatus::kError;
-  }
-  openni::VideoFrameRef ref;
-  if (stream_.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) {
-    last_error_ = "readFrame failed: " + extended_error();
-    return ReadStatus::kError;
-  }
-  consecutive_timeouts_ = 0;
+ReadStatus convert_frame(const openni::VideoFrameRef& ref, const Intrinsics& K, float hfov,
+                         float vfov, RangeFrame& frame, std::string& error) {
   const openni::PixelFormat format = ref.getVideoMode().getPixelFormat();
   double unit = 0;
   if (format == openni::PIXEL_FORMAT_DEPTH_1_MM)
@@ -406,16 +398,16 @@ ReadStatus OpenNI2Source::next(RangeFrame& frame, std::chrono::milliseconds time
   else if (format == openni::PIXEL_FORMAT_DEPTH_100_UM)
     unit = 0.0001;
   else {
-    last_error_ = "unsupported depth pixel format " + std::to_string(static_cast<int>(format)) +
-                  " (expected DEPTH_1_MM or DEPTH_100_UM)";
+    error = "unsupported depth pixel format " + std::to_string(static_cast<int>(format)) +
+            " (expected DEPTH_1_MM or DEPTH_100_UM)";
     return ReadStatus::kError;
   }
   const int w = ref.getWidth(), h = ref.getHeight();
   const int stride = ref.getStrideInBytes();
   if (w <= 0 || h <= 0 || stride < w * 2 || ref.getDataSize() < stride * (h - 1) + w * 2) {
-    last_error_ = "malformed depth frame " + std::to_string(ref.getFrameIndex()) + " (" +
-                  std::to_string(w) + "x" + std::to_string(h) + ", stride " +
-                  std::to_string(stride) + ", " + std::to_string(ref.getDataSize()) + " bytes)";
+    error = "malformed depth frame " + std::to_string(ref.getFrameIndex()) + " (" +
+            std::to_string(w) + "x" + std::to_string(h) + ", stride " + std::to_string(stride) +
+            ", " + std::to_string(ref.getDataSize()) + " bytes)";
     return ReadStatus::kError;
   }
   frame = RangeFrame{};
@@ -430,15 +422,110 @@ ReadStatus OpenNI2Source::next(RangeFrame& frame, std::chrono::milliseconds time
     std::memcpy(frame.depth.data.data() + static_cast<std::size_t>(v) * w,
                 bytes + static_cast<std::size_t>(v) * stride, static_cast<std::size_t>(w) * 2);
   frame.depth_unit_m = unit;
-  if (info_.K.valid() && info_.K.width == w && info_.K.height == h)
-    frame.K = info_.K;
-  else if (hfov_ > 0 && vfov_ > 0)
-    frame.K = Intrinsics::from_fov(w, h, hfov_, vfov_);
-  ++delivered_;
+  if (K.valid() && K.width == w && K.height == h)
+    frame.K = K;
+  else if (hfov > 0 && vfov > 0)
+    frame.K = Intrinsics::from_fov(w, h, hfov, vfov);
   return ReadStatus::kOk;
 }
 
+ReadStatus OpenNI2Source::timed_out(bool gone) {
+  ++consecutive_timeouts_;
+  if (gone || (listening_ && disconnect_.fired())) {
+    disconnected_ = true;
+    last_error_ = "device '" + std::string(device_.getDeviceInfo().getUri()) +
+                  "' disconnected after " + std::to_string(delivered_) +
+                  " frames; close() and open() to reconnect";
+    return ReadStatus::kDisconnected;
+  }
+  if (frame_count_ && delivered_ >= *frame_count_) {
+    end_of_stream_ = true;
+    return ReadStatus::kEndOfStream;
+  }
+  int finished = 0;
+  if (virtual_device_ &&
+      stream_.getProperty(kVsensorPropertyFinished, &finished) == openni::STATUS_OK &&
+      finished == 1) {
+    // A real-time virtual sensor emitted its last frame (frames a slow reader missed show as
+    // index gaps, as with a real sensor).
+    end_of_stream_ = true;
+    return ReadStatus::kEndOfStream;
+  }
+  if (is_file_ && consecutive_timeouts_ >= 3) {
+    // Three waits in a row without a frame in manual mode: the player has nothing left (a
+    // recording without a frame count, e.g. from a killed recorder, or a truncated file).
+    end_of_stream_ = true;
+    last_error_ = "the .oni player delivered " + std::to_string(delivered_) + " frames " +
+                  (frame_count_ ? "of " + std::to_string(*frame_count_)
+                                : std::string("(the file header has no frame count)"));
+    return ReadStatus::kEndOfStream;
+  }
+  if (!is_file_ && options_.disconnect_timeouts > 0 &&
+      consecutive_timeouts_ >= options_.disconnect_timeouts) {
+    disconnected_ = true;
+    last_error_ = "no frame from '" + uri_ + "' in " + std::to_string(consecutive_timeouts_) +
+                  " consecutive waits; treating the device as disconnected";
+    return ReadStatus::kDisconnected;
+  }
+  return ReadStatus::kTimeout;
+}
+
+ReadStatus OpenNI2Source::next(RangeFrame& frame, std::chrono::milliseconds timeout) {
+  if (!stream_.isValid()) {
+    last_error_ = "source '" + uri_ + "' is not open";
+    return ReadStatus::kError;
+  }
+  if (end_of_stream_) return ReadStatus::kEndOfStream;
+  if (disconnected_) return ReadStatus::kDisconnected;
+  const bool gone = listening_ && disconnect_.fired();
+  // After a disconnect only frames already delivered by the driver are read (no waiting).
+  int wait_ms = gone ? 0 : static_cast<int>(std::clamp<long long>(timeout.count(), 0, 1 << 30));
+  // All announced frames delivered: a short wait confirms the end (manual pace produces any
+  // further frame at once).
+  if (frame_count_ && delivered_ >= *frame_count_) wait_ms = std::min(wait_ms, 50);
+  if (frame_listening_) {
+    // The listener holds every frame the device emitted: take the oldest, waiting for one in
+    // steps of 1 ms up to the timeout.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(wait_ms);
+    HeldFrame held;
+    while (!listener_.try_pop(held)) {
+      if (std::chrono::steady_clock::now() >= deadline) return timed_out(gone);
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    if (held.status != ReadStatus::kOk) {
+      last_error_ = held.error;
+      return held.status;
+    }
+    consecutive_timeouts_ = 0;
+    frame = std::move(held.frame);
+    ++delivered_;
+    return ReadStatus::kOk;
+  }
+  openni::VideoStream* streams[] = {&stream_};
+  int ready = -1;
+  const openni::Status rc = openni::OpenNI::waitForAnyStream(streams, 1, &ready, wait_ms);
+  if (rc == openni::STATUS_TIME_OUT) return timed_out(gone);
+  if (rc != openni::STATUS_OK) {
+    last_error_ = "waitForAnyStream failed: " + extended_error();
+    return ReadStatus::kError;
+  }
+  openni::VideoFrameRef ref;
+  if (stream_.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) {
+    last_error_ = "readFrame failed: " + extended_error();
+    return ReadStatus::kError;
+  }
+  consecutive_timeouts_ = 0;
+  const ReadStatus st = convert_frame(ref, info_.K, hfov_, vfov_, frame, last_error_);
+  if (st == ReadStatus::kOk) ++delivered_;
+  return st;
+}
+
 void OpenNI2Source::close() {
+  if (frame_listening_) {
+    stream_.removeNewFrameListener(&listener_);
+    frame_listening_ = false;
+  }
+  listener_.clear();
   if (listening_) {
     openni::OpenNI::removeDeviceDisconnectedListener(&disconnect_);
     listening_ = false;

@@ -63,6 +63,10 @@ struct PipelineOptions {
   enum class Backlog { kAuto, kSkip, kWait } backlog = Backlog::kAuto;
   //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
   std::function<bool()> keep_going;
+  //! Records every delivered frame (frames before first_frame too), in delivery order, from a
+  //! stage of its own: acquisition hands it a copy and never waits for it. Nothing is dropped:
+  //! its queue is bounded only by memory (PipelineStats::peak_record_queue_bytes). Optional.
+  std::function<void(const SourceInfo& info, const RangeFrame& frame)> record;
   //! Called after each used frame (frames used so far), from the calling thread. Optional.
   std::function<void(std::uint64_t)> on_frame;
   //! Called when a window starts (true) or ends (false) its filter, from a worker thread, one
@@ -117,8 +121,10 @@ struct PipelineStats : AcquisitionStats {
   //! Latency from a frame's arrival (its delivery by next()) to its window's output (on_window
   //! returned), over the frames of output windows: median and 95th percentile, seconds.
   double latency_p50_s = 0, latency_p95_s = 0;
-  std::size_t peak_waiting_bytes = 0;  //!< most bytes of complete windows waiting at once
-  SourceInfo info;                     //!< the source's info after open()
+  std::size_t peak_waiting_bytes = 0;       //!< most bytes of complete windows waiting at once
+  std::uint64_t frames_recorded = 0;        //!< frames handed to `record` that it wrote
+  std::size_t peak_record_queue_bytes = 0;  //!< most bytes of frames waiting to be recorded
+  SourceInfo info;                          //!< the source's info after open()
 };
 
 //! Opens `source` (unless `already_open`), reads frames (acquire()) until the end of the
