@@ -200,27 +200,43 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
   std::uint64_t first_index = 0, last_index = 0;
   std::size_t next_window = 0;
   // Hands the collected window on (or skips it); `last`: acquisition has ended.
-  auto flush = [&](bool last) {
-    if (!job || job->frames.empty()) return;
-    JobPtr j = std::move(job);
-    job.reset();
+  // A complete window beyond the budget is skipped only once the next frame arrives: the
+  // window acquisition ends with is always cleaned.
+  JobPtr skip_candidate;
+  std::uint64_t candidate_first_index = 0, candidate_last_index = 0;
+  auto confirm_skip = [&] {
+    if (!skip_candidate) return;
+    SkippedWindow s;
+    s.window = skip_candidate->window;
+    s.first_frame = skip_candidate->first_frame;
+    s.last_frame = skip_candidate->first_frame + skip_candidate->frames.size() - 1;
+    s.first_index = candidate_first_index;
+    s.last_index = candidate_last_index;
+    st.skipped.push_back(s);
+    skip_candidate.reset();
+  };
+  auto submit = [&](JobPtr j, bool last) {
     const std::size_t waiting = waiting_bytes.load();
     if (waiting > 0 && waiting + j->bytes > options.memory_budget_bytes) {
       if (may_skip && !last) {
-        SkippedWindow s;
-        s.window = j->window;
-        s.first_frame = j->first_frame;
-        s.last_frame = j->first_frame + j->frames.size() - 1;
-        s.first_index = first_index;
-        s.last_index = last_index;
-        st.skipped.push_back(s);
+        skip_candidate = std::move(j);
+        candidate_first_index = first_index;
+        candidate_last_index = last_index;
         return;
       }
-      wait_all();  // a file source: never skip, wait for the backlog to be cleaned
+      wait_all();  // a file source (or the last window): wait for the backlog to be cleaned
     }
     waiting_bytes += j->bytes;
     peak_waiting = std::max(peak_waiting, waiting_bytes.load());
     fuse_node->try_put(std::move(j));  // queued in the stages' arena
+  };
+  // Hands the collected window on (or skips it); `last`: acquisition has ended.
+  auto flush = [&](bool last) {
+    if (last && skip_candidate) submit(std::move(skip_candidate), true);
+    if (!job || job->frames.empty()) return;
+    JobPtr j = std::move(job);
+    job.reset();
+    submit(std::move(j), last);
   };
 
   AcquisitionOptions ao = acquisition_options(options);
@@ -239,6 +255,7 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
             record_node->try_put(std::move(copy));  // queued in the recording's arena
           }
           if (pos < options.first_frame) return;
+          confirm_skip();  // acquisition goes on: the held window is skipped
           const auto now = Clock::now();
           if (!job) {
             job = std::make_shared<Job>();
