@@ -5,6 +5,10 @@
 
 #include "scanclean/clean_job.h"
 
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
 #include <cctype>
 #include <chrono>
 #include <cstdio>
@@ -32,7 +36,7 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
     double min_depth = 0, max_depth = 0;
     bool no_weights = false;
     bool no_fuse = false;
-    double memory_budget_mib = 512;
+    double memory_budget_mib = 128;
   };
   auto v = std::make_shared<Values>();
   cmd.add_option("--accumulate", v->accumulate,
@@ -194,6 +198,13 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   validate(options);
   install_sigint_handler();
   options.keep_going = [] { return !interrupted(); };
+#ifdef __GLIBC__
+  // Frames and clouds are large, short-lived blocks freed by other threads than the ones that
+  // made them: with glibc's sliding mmap threshold they end up in per-thread heaps that keep
+  // growing. A fixed threshold returns them to the system (a 30 s live run: 1.3 -> 0.9 GB peak).
+  mallopt(M_MMAP_THRESHOLD, 256 * 1024);
+  mallopt(M_ARENA_MAX, 2);
+#endif
 
   std::fprintf(stderr, "scanclean %s: opening the source\n", command.c_str());
   source.open();

@@ -56,8 +56,9 @@ struct PipelineOptions {
   //! Complete windows waiting to be cleaned (their raw frames, from the moment the window is
   //! complete until its output is delivered) may hold at most this many bytes; a window that
   //! would exceed it while others wait is skipped (device sources) or waited for (files). A
-  //! window alone is always accepted. > 0. Default 512 MiB: about 28 windows of 30 VGA frames.
-  std::size_t memory_budget_bytes = std::size_t{512} << 20;
+  //! window alone is always accepted. > 0. Default 128 MiB: 7 windows of 30 VGA frames (the
+  //! latency of a cleaned window grows with the windows waiting before it).
+  std::size_t memory_budget_bytes = std::size_t{128} << 20;
   //! Whether a window beyond the budget is skipped. kAuto: skip for device sources (SourceInfo
   //! kind "openni2" or "vsensor", which pace themselves), wait for every other (file) source.
   enum class Backlog { kAuto, kSkip, kWait } backlog = Backlog::kAuto;
