@@ -5,9 +5,9 @@
 //! `scanclean replay` and `scanclean capture`.
 //!
 //! Stages (a oneTBB flow graph, joined by queues): acquisition (acquire(), in the calling
-//! thread) only drains the source at its own rate and collects the frames of the current window
-//! (a recording decorator around the source writes every frame there); conversion + per-pixel
-//! fusion (window_input); the filter (clean_window_input); the output (on_window). Windows stay
+//! thread) only drains the source at its own rate and collects the frames of the current window;
+//! the recording (`record`, a stage of its own, in its own arena); conversion + per-pixel fusion
+//! (window_input); the filter (clean_window_input); the output (on_window). Windows stay
 //! in order and the filter is deterministic, so outputs do not depend on thread counts.
 //! Complete windows wait for cleaning within memory_budget_bytes; beyond it, a device source's
 //! window is skipped for cleaning (counted and listed in PipelineStats::skipped; a recording
@@ -73,8 +73,8 @@ struct PipelineOptions {
   //! Called when a window starts (true) or ends (false) its filter, from a worker thread, one
   //! call at a time. Optional (progress displays).
   std::function<void(std::size_t window, bool starts)> on_cleaning;
-  //! Called with a window just before it is fused and filtered (`frames` = its raw frames), from
-  //! a worker thread, one window at a time, in order. Optional (tests: a slow cleaning stage).
+  //! Called with a window's number just before it is fused and filtered, from a worker thread,
+  //! one window at a time, in order. Optional (tests: a slow cleaning stage).
   std::function<void(std::size_t window)> before_cleaning;
 };
 
@@ -110,7 +110,7 @@ struct PipelineStats : AcquisitionStats {
   std::uint64_t frames_used = 0;     //!< frames in [first_frame, last_frame) put in windows
   std::uint64_t frames_cleaned = 0;  //!< frames of the windows that were output
   std::size_t windows = 0;
-  std::size_t points_in = 0;        //!< points from frame_to_points over all used frames
+  std::size_t points_in = 0;  //!< valid samples (fused windows) or points (others) of used frames
   std::size_t points_out = 0;       //!< points in all outputs
   std::size_t outliers = 0;         //!< points the filter removed (FilterStats::removed())
   std::size_t points_fused = 0;     //!< points the per-pixel fusion made (input to the filter)
