@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -258,6 +259,47 @@ TEST(ScancleanCliTest, CaptureWithoutASensorExitsFiveAndSaysWhatToDo) {
   EXPECT_EQ(r.exit_code, 5) << r.err;
   EXPECT_TRUE(contains(r.err, "no depth sensor found; run scanclean devices")) << r.err;
   EXPECT_FALSE(fs::exists(dir / "live.ply"));
+}
+
+TEST(ScancleanCliTest, LiveCaptureRecordsEveryFrameAndKeepsTheLatestWindow) {
+  const auto dir = test::make_temp_dir("cli");
+  const fs::path rec = dir / "rec", latest = dir / "latest.ply", out = dir / "live.ply";
+  const ProgramRun r = run(
+      {"capture", "--source", "vsensor://pattern?w=160&h=120&n=40&fps=60&pace=realtime", "-o",
+       out.string(), "--accumulate", "10", "--record", rec.string(), "--latest", latest.string()},
+      dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // Summary: what the sensor delivered, what was recorded and cleaned, the skipped windows and
+  // the latency are all stated; the recording holds every delivered frame.
+  for (const char* key : {"frames delivered:", "frames recorded:", "frames cleaned:",
+                          "windows skipped:", "latency (frame -> window):", "filter phases:"})
+    EXPECT_TRUE(contains(r.out, key)) << key << "\n" << r.out;
+  const std::string csv = slurp(rec / "frames.csv");
+  const auto rows = static_cast<std::size_t>(std::count(csv.begin(), csv.end(), '\n')) - 1;
+  // The number after a summary key (the summary aligns its values).
+  auto count_of = [&](const std::string& key) -> long long {
+    const auto at = r.out.find(key);
+    if (at == std::string::npos) return -1;
+    std::istringstream line(r.out.substr(at + key.size()));
+    long long v = -1;
+    line >> v;
+    return v;
+  };
+  EXPECT_EQ(count_of("frames delivered:"), static_cast<long long>(rows)) << r.out;
+  EXPECT_EQ(count_of("frames recorded:"), static_cast<long long>(rows)) << r.out;
+  EXPECT_EQ(count_of("windows skipped:"), 0) << r.out;
+  // The latest window is the last numbered output.
+  const PointCloud last = read_point_cloud(latest);
+  EXPECT_FALSE(last.empty());
+  const fs::path last_window = dir / ("live_000" + std::to_string((rows - 1) / 10) + ".ply");
+  ASSERT_TRUE(fs::exists(last_window)) << last_window;
+  EXPECT_EQ(read_point_cloud(last_window).positions, last.positions);
+  // A second capture into the same recording folder is refused before anything is read.
+  const ProgramRun again = run({"capture", "--source", "vsensor://pattern?w=160&h=120&n=5", "-o",
+                                (dir / "x.ply").string(), "--record", rec.string()},
+                               dir);
+  EXPECT_EQ(again.exit_code, 4) << again.err;
+  EXPECT_TRUE(contains(again.err, "already holds a recording")) << again.err;
 }
 
 TEST(ScancleanCliTest, ReplayOfTheBundledRecordingWritesAnOrganizedRawFrame) {
