@@ -299,17 +299,21 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   sum.add_count("frames used", st.frames_used);
   if (!options.raw) sum.add_count("frames cleaned", st.frames_cleaned);
   {
+    // Every skipped window, as runs of consecutive windows: "5-9 (frames 150..299), 11 (...)".
     std::string names;
-    for (std::size_t i = 0; i < st.skipped.size() && i < 8; ++i)
-      names += (i ? ", " : ": ") + std::to_string(st.skipped[i].window) + " (frames " +
+    for (std::size_t i = 0; i < st.skipped.size();) {
+      std::size_t j = i;
+      while (j + 1 < st.skipped.size() && st.skipped[j + 1].window == st.skipped[j].window + 1) ++j;
+      names += (i ? ", " : ": ") + std::to_string(st.skipped[i].window) +
+               (j > i ? "-" + std::to_string(st.skipped[j].window) : std::string()) + " (frames " +
                std::to_string(st.skipped[i].first_frame) + ".." +
-               std::to_string(st.skipped[i].last_frame) + ")";
-    if (st.skipped.size() > 8) names += ", ...";
+               std::to_string(st.skipped[j].last_frame) + ")";
+      i = j + 1;
+    }
     sum.add("windows skipped", with_thousands(st.skipped.size()) +
                                    (st.skipped.empty() ? std::string()
-                                                       : names + " (cleaning fell behind; "
-                                                                 "replay the recording to clean "
-                                                                 "them)"));
+                                                       : names + "; cleaning fell behind, replay "
+                                                                 "the recording to clean them"));
   }
   sum.add("dropped frames (index gaps)",
           with_thousands(st.dropped_frames) + " in " + with_thousands(st.gap_events) + " gaps" +
