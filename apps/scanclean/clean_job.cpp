@@ -325,9 +325,9 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     sum.add("disconnects", with_thousands(st.disconnects) + " (" + with_thousands(st.reconnects) +
                                " reconnected, " + with_thousands(st.reconnect_lost_frames) +
                                " frames lost while reconnecting)");
-  if (st.frames_used > 0)
+  if (st.frames_cleaned > 0)  // over the frames of the cleaned (or raw) windows
     sum.add("points per frame", with_thousands(st.min_points_per_frame) + " min, " +
-                                    with_thousands(st.points_in / st.frames_used) + " mean, " +
+                                    with_thousands(st.points_in / st.frames_cleaned) + " mean, " +
                                     with_thousands(st.max_points_per_frame) + " max");
   sum.add_count("flying pixels dropped", st.edge_dropped);
   sum.add_count("points in", st.points_in);
