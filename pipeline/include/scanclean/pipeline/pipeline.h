@@ -110,9 +110,9 @@ struct PipelineStats : AcquisitionStats {
   std::uint64_t frames_used = 0;     //!< frames in [first_frame, last_frame) put in windows
   std::uint64_t frames_cleaned = 0;  //!< frames of the windows that were output
   std::size_t windows = 0;
-  std::size_t points_in = 0;  //!< valid samples (fused windows) or points (others) of used frames
-  std::size_t points_out = 0;       //!< points in all outputs
-  std::size_t outliers = 0;         //!< points the filter removed (FilterStats::removed())
+  std::size_t points_in = 0;   //!< valid samples (fused windows) or points (others) of used frames
+  std::size_t points_out = 0;  //!< points in all outputs
+  std::size_t outliers = 0;    //!< points the filter removed (FilterStats::removed())
   std::size_t points_fused = 0;     //!< points the per-pixel fusion made (input to the filter)
   std::size_t fusion_rejected = 0;  //!< samples the fusion dropped (off the pixel's median)
   std::size_t edge_dropped = 0, out_of_range = 0, no_normal = 0;
