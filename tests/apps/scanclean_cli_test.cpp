@@ -2,10 +2,15 @@
 // code is checked against the documented table (0 ok, 2 bad option, 3 bad input data, 4 file I/O
 // failure, 5 device unavailable) and its output files are read back.
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +18,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "scanclean/io/point_cloud_io.h"
@@ -300,6 +306,47 @@ TEST(ScancleanCliTest, LiveCaptureRecordsEveryFrameAndKeepsTheLatestWindow) {
                                dir);
   EXPECT_EQ(again.exit_code, 4) << again.err;
   EXPECT_TRUE(contains(again.err, "already holds a recording")) << again.err;
+}
+
+TEST(ScancleanCliTest, CtrlCStopsACaptureMidWindowCleansWhatWasCapturedAndExits130) {
+  const auto dir = test::make_temp_dir("cli");
+  const fs::path out = dir / "live.ply", rec = dir / "rec", log = dir / "capture.log";
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd >= 0) {
+      ::dup2(fd, 1);
+      ::dup2(fd, 2);
+    }
+    ::execl(SCANCLEAN_PROGRAM, SCANCLEAN_PROGRAM, "capture", "--source",
+            "vsensor://pattern?w=160&h=120&n=3000&fps=30&pace=realtime", "-o", out.c_str(),
+            "--accumulate", "1000", "--record", rec.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Interrupt once some frames were recorded (a window of 1000 frames is then half-way at most).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  std::size_t rows = 0;
+  while (std::chrono::steady_clock::now() < deadline && rows < 20) {
+    const std::string csv = slurp(rec / "frames.csv");
+    rows = csv.empty() ? 0 : static_cast<std::size_t>(std::count(csv.begin(), csv.end(), '\n'));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_EQ(::kill(child, SIGINT), 0);
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status)) << slurp(log);
+  EXPECT_EQ(WEXITSTATUS(status), 130) << slurp(log);
+  const std::string text = slurp(log);
+  EXPECT_TRUE(contains(text, "interrupted")) << text;
+  // What was captured is cleaned and written: one partial window, every frame recorded.
+  ASSERT_TRUE(fs::exists(out)) << text;
+  EXPECT_FALSE(read_point_cloud(out).empty());
+  const std::string csv = slurp(rec / "frames.csv");
+  const auto recorded = static_cast<long long>(std::count(csv.begin(), csv.end(), '\n')) - 1;
+  EXPECT_GE(recorded, 19);
+  EXPECT_LT(recorded, 1000);
+  EXPECT_TRUE(contains(text, "frames recorded:")) << text;
 }
 
 TEST(ScancleanCliTest, ReplayOfTheBundledRecordingWritesAnOrganizedRawFrame) {
