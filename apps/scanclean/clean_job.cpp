@@ -293,9 +293,8 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   sum.add("stopped", to_string(st.stop) + (st.message.empty() ? "" : ": " + st.message));
   sum.add_count("frames delivered", st.frames_read);
   if (!live.record.empty())
-    sum.add("frames recorded", with_thousands(st.frames_recorded) + " (in " + live.record.string() +
-                                   "; peak queue " +
-                                   with_thousands(st.peak_record_queue_bytes >> 20) + " MiB)");
+    sum.add("frames recorded",
+            with_thousands(st.frames_recorded) + " (in " + live.record.string() + ")");
   sum.add_count("frames used", st.frames_used);
   if (!options.raw) sum.add_count("frames cleaned", st.frames_cleaned);
   {

@@ -46,8 +46,7 @@ int run_capture(const CaptureCommandOptions& c, const std::function<void(Pipelin
   intrinsics(c.source, so);
   check_clean_outputs("capture", o, c.source, c.output, c.outliers);
   std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
-  // The recording is a stage of its own (the pipeline hands it every frame it reads), so that
-  // reading the sensor never waits for the disk.
+  // The acquisition stage records every frame it reads (PipelineOptions::record).
   std::unique_ptr<FrameRecorder> recorder;
   if (!c.record.empty()) {
     std::error_code ec;

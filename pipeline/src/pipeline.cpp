@@ -102,13 +102,11 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
                          (info.kind == "openni2" || info.kind == "vsensor"));
 
   // The stages run on TBB workers while this thread acquires: one worker more than the default
-  // (whose one master slot this thread, busy reading the source, would not use), plus one for
-  // the recording, in an arena of its own so that it never waits behind a long filter task.
+  // (whose one master slot this thread, busy reading the source, would not use).
   const int workers = std::max(1, tbb::info::default_concurrency());
   tbb::global_control parallelism(tbb::global_control::max_allowed_parallelism,
-                                  static_cast<std::size_t>(workers) + 2);
+                                  static_cast<std::size_t>(workers) + 1);
   tbb::task_arena arena(workers + 1, 1);
-  tbb::task_arena record_arena(2, 1);
 
   // Written only by the (serial) output stage; read after the graph is done.
   struct WindowCounts {
@@ -119,28 +117,14 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     double seconds_points = 0, seconds_filter = 0;
     std::vector<double> latencies;
   } wc;
-  std::atomic<std::size_t> waiting_bytes{0}, record_bytes{0};
-  std::size_t peak_waiting = 0, peak_record = 0;
-  std::uint64_t frames_recorded = 0;  // written only by the (serial) record stage
+  std::atomic<std::size_t> waiting_bytes{0};
+  std::size_t peak_waiting = 0;
+  std::uint64_t frames_recorded = 0;
 
   std::unique_ptr<tbb::flow::graph> g;
   using Node = tbb::flow::function_node<JobPtr, JobPtr>;
   std::unique_ptr<Node> fuse_node, filter_node;
   std::unique_ptr<tbb::flow::function_node<JobPtr>> out_node;
-  using FramePtr = std::shared_ptr<const RangeFrame>;
-  std::unique_ptr<tbb::flow::graph> rg;  // the recording's graph (record_arena)
-  std::unique_ptr<tbb::flow::function_node<FramePtr>> record_node;
-  if (options.record)
-    record_arena.execute([&] {
-      rg = std::make_unique<tbb::flow::graph>();
-      record_node = std::make_unique<tbb::flow::function_node<FramePtr>>(
-          *rg, tbb::flow::serial, [&](const FramePtr& f) {
-            options.record(info, *f);
-            ++frames_recorded;
-            record_bytes -= frame_bytes(*f);
-            return tbb::flow::continue_msg();
-          });
-    });
   arena.execute([&] {
     g = std::make_unique<tbb::flow::graph>();
     fuse_node = std::make_unique<Node>(*g, tbb::flow::serial, [&](JobPtr j) {
@@ -192,9 +176,6 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     tbb::flow::make_edge(*filter_node, *out_node);
   });
   auto wait_all = [&] { arena.execute([&] { g->wait_for_all(); }); };
-  auto wait_record = [&] {
-    if (rg) record_arena.execute([&] { rg->wait_for_all(); });
-  };
 
   JobPtr job;
   std::uint64_t first_index = 0, last_index = 0;
@@ -242,17 +223,15 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
   AcquisitionOptions ao = acquisition_options(options);
   ao.keep_going = [&] {
     // A stage failed: stop, the error is rethrown below.
-    if (g->is_cancelled() || (rg && rg->is_cancelled())) return false;
+    if (g->is_cancelled()) return false;
     return !options.keep_going || options.keep_going();
   };
   try {
     static_cast<AcquisitionStats&>(st) =
         acquire(source, ao, [&](RangeFrame& frame, std::uint64_t pos) {
-          if (record_node) {
-            auto copy = std::make_shared<const RangeFrame>(frame);
-            record_bytes += frame_bytes(*copy);
-            peak_record = std::max(peak_record, record_bytes.load());
-            record_node->try_put(std::move(copy));  // queued in the recording's arena
+          if (options.record) {  // in this thread: the recording is part of acquisition
+            options.record(info, frame);
+            ++frames_recorded;
           }
           if (pos < options.first_frame) return;
           confirm_skip();  // acquisition goes on: the held window is skipped
@@ -280,19 +259,13 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
           }
         });
     flush(true);  // the last (possibly partial) window: nothing read is lost
-    wait_record();
     wait_all();
   } catch (...) {
     const std::exception_ptr e = std::current_exception();
     g->cancel();
-    if (rg) rg->cancel();
-    try {
-      wait_record();
-    } catch (...) {  // the first error is the one reported
-    }
     try {
       wait_all();
-    } catch (...) {
+    } catch (...) {  // the first error is the one reported
     }
     std::rethrow_exception(e);
   }
@@ -315,7 +288,6 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
   st.latency_p95_s = percentile(wc.latencies, 0.95);
   st.peak_waiting_bytes = peak_waiting;
   st.frames_recorded = frames_recorded;
-  st.peak_record_queue_bytes = peak_record;
   st.seconds_total = seconds_since(start);
   return st;
 }

@@ -5,9 +5,9 @@
 //! `scanclean replay` and `scanclean capture`.
 //!
 //! Stages (a oneTBB flow graph, joined by queues): acquisition (acquire(), in the calling
-//! thread) only drains the source at its own rate and collects the frames of the current window;
-//! the recording (`record`, a stage of its own, in its own arena); conversion + per-pixel fusion
-//! (window_input); the filter (clean_window_input); the output (on_window). Windows stay
+//! thread) only drains the source at its own rate, records every frame (`record`) and collects
+//! the frames of the current window; conversion + per-pixel fusion (window_input); the filter
+//! (clean_window_input); the output (on_window). Windows stay
 //! in order and the filter is deterministic, so outputs do not depend on thread counts.
 //! Complete windows wait for cleaning within memory_budget_bytes; beyond it, a device source's
 //! window is skipped for cleaning (counted and listed in PipelineStats::skipped; a recording
@@ -64,9 +64,10 @@ struct PipelineOptions {
   enum class Backlog { kAuto, kSkip, kWait } backlog = Backlog::kAuto;
   //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
   std::function<bool()> keep_going;
-  //! Records every delivered frame (frames before first_frame too), in delivery order, from a
-  //! stage of its own: acquisition hands it a copy and never waits for it. Nothing is dropped:
-  //! its queue is bounded only by memory (PipelineStats::peak_record_queue_bytes). Optional.
+  //! Records every delivered frame (frames before first_frame too), in delivery order, in the
+  //! acquisition stage itself (this thread, never behind a cleaning task: TBB workers run those).
+  //! A source that emits frames on its own clock must keep them while this runs (OpenNI2
+  //! devices do, drivers/openni2). Optional.
   std::function<void(const SourceInfo& info, const RangeFrame& frame)> record;
   //! Called after each used frame (frames used so far), from the calling thread. Optional.
   std::function<void(std::uint64_t)> on_frame;
@@ -122,10 +123,9 @@ struct PipelineStats : AcquisitionStats {
   //! Latency from a frame's arrival (its delivery by next()) to its window's output (on_window
   //! returned), over the frames of output windows: median and 95th percentile, seconds.
   double latency_p50_s = 0, latency_p95_s = 0;
-  std::size_t peak_waiting_bytes = 0;       //!< most bytes of complete windows waiting at once
-  std::uint64_t frames_recorded = 0;        //!< frames handed to `record` that it wrote
-  std::size_t peak_record_queue_bytes = 0;  //!< most bytes of frames waiting to be recorded
-  SourceInfo info;                          //!< the source's info after open()
+  std::size_t peak_waiting_bytes = 0;  //!< most bytes of complete windows waiting at once
+  std::uint64_t frames_recorded = 0;   //!< frames `record` wrote
+  SourceInfo info;                     //!< the source's info after open()
 };
 
 //! Opens `source` (unless `already_open`), reads frames (acquire()) until the end of the

@@ -1,8 +1,8 @@
 #pragma once
 //! \file frame_recorder.h
-//! Writes delivered frames to a recording folder (format v1) from a stage of its own: the
-//! capture pipeline hands every frame it reads to a FrameRecorder in a separate stage, so that
-//! reading the sensor never waits for the disk (recording_source.h is the synchronous decorator).
+//! Writes delivered frames to a recording folder (format v1), for a pipeline's acquisition stage
+//! (PipelineOptions::record): the frames it reads are recorded there, not through a source
+//! decorator (recording_source.h), so that the recording never depends on what the pipeline pulls.
 
 #include <cstdint>
 #include <filesystem>
