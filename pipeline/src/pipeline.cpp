@@ -258,6 +258,9 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
             flush(false);
           }
         });
+    // Acquisition is over: a live device stops streaming (its frames would pile up in the
+    // driver's queue while the backlog is cleaned).
+    source.close();
     flush(true);  // the last (possibly partial) window: nothing read is lost
     wait_all();
   } catch (...) {

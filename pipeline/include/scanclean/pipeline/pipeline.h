@@ -128,7 +128,8 @@ struct PipelineStats : AcquisitionStats {
   SourceInfo info;                     //!< the source's info after open()
 };
 
-//! Opens `source` (unless `already_open`), reads frames (acquire()) until the end of the
+//! Opens `source` (unless `already_open`) and closes it when acquisition ends (before the
+//! backlog is cleaned), reads frames (acquire()) until the end of the
 //! stream, the frame range or time limit, a disconnect (after the reconnect attempts), too many
 //! timeouts, keep_going() == false or kError, and delivers each cleaned window to `on_window` in
 //! order (the last, possibly partial window too: it is never skipped), from a worker thread, one
