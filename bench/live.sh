@@ -53,7 +53,7 @@ run_one() {  # run_one NAME URI
   recorded=$(($(wc -l <"$dir/rec/frames.csv") - 1))
   cleaned=$(field "$f" "frames cleaned" | tr -d ,)
   windows=$(field "$f" "windows" | tr -d ,)
-  skipped=$(field "$f" "windows skipped" | awk '{print $1}' | tr -d ,)
+  skipped=$(field "$f" "windows skipped" | awk '{print $1}' | tr -d ,:)
   lat=$(field "$f" "latency (frame -> window)" | sed 's/p50 \(.*\) s, p95 \(.*\) s/\1 \/ \2/')
   printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$name" "$RUN_S" \
     "$((read + gaps))" "$read" "$recorded" "$cleaned" "$windows" "$skipped" "$lat" \
