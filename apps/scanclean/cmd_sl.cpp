@@ -22,6 +22,7 @@
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
 #include "scanclean/mesh_handoff.h"
+#include "scanclean/output_checks.h"
 #include "scanclean/summary.h"
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -76,9 +77,10 @@ struct SlCommandOptions {
   std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
 };
 
-//! The parent folder of an output must exist and the extension be one of `exts`.
-void check_output(const std::string& option, const std::string& file,
-                  const std::vector<std::string>& exts) {
+//! The extension of an output must be one of `exts`; its folder must exist and be writable,
+//! and it must not be one of `inputs` (the shared checks of every command, output_checks.h).
+void check_output(const std::string& command, const std::string& option, const std::string& file,
+                  const std::vector<std::string>& exts, const std::vector<PathArg>& inputs = {}) {
   const std::filesystem::path p(file);
   std::string ext = p.extension().string();
   for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
@@ -89,10 +91,7 @@ void check_output(const std::string& option, const std::string& file,
     list += (list.empty() ? "" : " ") + e;
   }
   if (!ok) throw OptionError(option + ": '" + file + "' must end in one of: " + list);
-  const auto parent = p.parent_path();
-  std::error_code ec;
-  if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
-    throw OptionError(option + ": folder '" + parent.string() + "' does not exist");
+  check_output_files(command, inputs, {{option, p}}, false);
 }
 
 SlChessboard chessboard_of(const SlCommandOptions& c) {
@@ -212,9 +211,9 @@ int run_decode(const SlCommandOptions& c) {
   if (!(c.residual_range_m > 0)) throw OptionError("--residual-range: expected > 0 metres");
   if (!c.residual_map.empty()) {
     if (!c.fit_plane) throw OptionError("--residual-map needs --fit-plane");
-    check_output("--residual-map", c.residual_map + "_raw.png", {".png"});
+    check_output("sl decode", "--residual-map", c.residual_map + "_raw.png", {".png"});
   }
-  check_output("-o", c.output, {".ply", ".pcd", ".xyz"});
+  check_output("sl decode", "-o", c.output, {".ply", ".pcd", ".xyz"});
   check_mesh_output(*c.mesh, "sl decode");
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
@@ -379,8 +378,13 @@ int run_calibrate(const SlCommandOptions& c) {
   co.estimate_k3 = c.estimate_k3;
   co.zero_tangential = c.zero_tangential;
   validate(co);
-  check_output("-o", c.output, {".yml", ".yaml"});
-  if (!c.kamino_xml.empty()) check_output("--kamino-xml", c.kamino_xml, {".xml"});
+  const std::vector<PathArg> references = {{"--compare", c.compare}};
+  check_output("sl calibrate", "-o", c.output, {".yml", ".yaml"}, references);
+  if (!c.kamino_xml.empty()) {
+    check_output("sl calibrate", "--kamino-xml", c.kamino_xml, {".xml"}, references);
+    check_output_files("sl calibrate", references,
+                       {{"-o", c.output}, {"--kamino-xml", c.kamino_xml}}, false);
+  }
   std::vector<std::filesystem::path> folders;
   for (const auto& a : c.captures) {
     const auto found = find_structured_light_captures(a);
