@@ -18,6 +18,8 @@
 #include "scanclean/interrupt.h"
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -156,6 +158,9 @@ void check_clean_outputs(const std::string& command, const PipelineOptions& opti
   if (!input.empty() && std::filesystem::is_regular_file(input, ec))
     inputs.push_back({"the source", input});
   check_output_files(command, inputs, {{"-o", output}, {"--outliers", outliers}});
+  std::error_code exists_ec;
+  if (!input.empty() && std::filesystem::exists(input, exists_ec))
+    note_report_input({"the source", input});  // a file or a folder (--report)
 }
 
 namespace {
@@ -211,10 +216,15 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
       return;
     }
     AtomicCommitGroup both;  // the cloud and its outliers, or neither
-    write_point_cloud(p, w.cloud);
+    WriteOptions wo;         // provenance: command line, h, noise sigma
+    wo.provenance =
+        options.raw ? provenance_text() : provenance_text(w.filter.h, w.filter.noise_sigma);
+    write_point_cloud(p, w.cloud, wo);
     if (!outliers.empty())
-      write_point_cloud(numbered ? window_path(outliers, w.window) : outliers, w.outliers);
+      write_point_cloud(numbered ? window_path(outliers, w.window) : outliers, w.outliers, wo);
     both.commit();
+    note_report_output({"-o", p});
+    if (!options.raw) note_report_filter(p.string(), w.filter);
     written.push_back(p);
   };
   const PipelineStats st = run_pipeline(

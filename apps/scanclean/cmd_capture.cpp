@@ -17,6 +17,7 @@
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/pipeline/pipeline.h"
 #include "scanclean/replay/recording_source.h"
+#include "scanclean/run_report.h"
 
 namespace scanclean::app {
 
@@ -94,6 +95,7 @@ const CommandRegistrar kRegistrar{{
           "(nothing written), 130 interrupted.");
       auto apply = add_clean_options(cmd);
       auto intrinsics = add_intrinsics_options(cmd);
+      add_report_option(cmd);
       return [c, apply, intrinsics] { return run_capture(*c, apply, intrinsics); };
     },
 }};

@@ -18,6 +18,8 @@
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -104,6 +106,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   const bool collapsed = (r.cloud.empty() && r.stats.points_in >= 1) ||
                          (r.cloud.size() == 1 && r.stats.points_in >= 2);
   if (!collapsed) {
+    w.provenance = provenance_text(r.stats.h, r.stats.noise_sigma);
     AtomicCommitGroup both;  // the cleaned cloud and the outliers, or neither
     write_point_cloud(c.output, r.cloud, w);
     if (!c.outliers.empty()) write_point_cloud(c.outliers, r.outliers, w);
@@ -156,6 +159,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
                                          s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
+  note_report_filter(c.output, s);
   run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
   if (collapsed) {
@@ -194,6 +198,7 @@ const CommandRegistrar kRegistrar{{
                      "default: guessed from the first line (see scanclean info)");
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
       c->mesh = add_mesh_option(cmd);
+      add_report_option(cmd);
       auto values = add_filter_options(cmd);
       return [c, values] { return run_filter(*c, *values); };
     },

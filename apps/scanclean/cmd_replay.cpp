@@ -15,6 +15,7 @@
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/pipeline/pipeline.h"
+#include "scanclean/run_report.h"
 
 namespace scanclean::app {
 
@@ -72,6 +73,7 @@ const CommandRegistrar kRegistrar{{
                    "possible)");
       auto apply = add_clean_options(cmd);
       c->mesh = add_mesh_option(cmd);
+      add_report_option(cmd);
       return [c, apply, intrinsics] { return run_replay(*c, apply, intrinsics); };
     },
 }};

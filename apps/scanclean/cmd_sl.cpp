@@ -22,6 +22,8 @@
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
 #include "scanclean/mesh_handoff.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -216,6 +218,9 @@ int run_decode(const SlCommandOptions& c) {
   }
   check_output("-o", c.output, {".ply", ".pcd", ".xyz"});
   check_mesh_output(*c.mesh, "sl decode");
+  note_report_input({"capture", c.capture});
+  if (!c.calib.empty()) note_report_input({"--calib", c.calib});
+  note_report_output({"-o", c.output});
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
     throw InputError(c.capture, "",
@@ -228,6 +233,7 @@ int run_decode(const SlCommandOptions& c) {
   const SlResult r = process_sl_capture(c.capture, o);
   std::string how;
   PointCloud cloud = frame_cloud(r.frame, &how);
+  std::string provenance = provenance_text();  // with the filter's h when it runs
 
   Summary sum("scanclean sl decode");
   sum.add("capture", c.capture + " (" + r.info.layout + " layout)");
@@ -307,6 +313,8 @@ int run_decode(const SlCommandOptions& c) {
     validate(fo);
     FilterResult fr = robust_filter(cloud, fo);
     progress.finish();
+    note_report_filter(c.output, fr.stats);
+    provenance = provenance_text(fr.stats.h, fr.stats.noise_sigma);
     sum.add("filter", with_thousands(fr.stats.points_out) + " points out, h " +
                           std::to_string(fr.stats.h * 1e3).substr(0, 6) + " mm, " +
                           std::to_string(fr.stats.seconds_total).substr(0, 5) + " s");
@@ -331,6 +339,7 @@ int run_decode(const SlCommandOptions& c) {
     w.ply_encoding = PlyEncoding::kAscii;
     w.pcd_encoding = "ascii";
   }
+  w.provenance = provenance;
   write_point_cloud(c.output, cloud, w);
   sum.add("output file", c.output + " (metres, camera frame)");
   run_mesh_handoff(*c.mesh, cloud, 0.0, sum);
@@ -381,6 +390,8 @@ int run_calibrate(const SlCommandOptions& c) {
   validate(co);
   check_output("-o", c.output, {".yml", ".yaml"});
   if (!c.kamino_xml.empty()) check_output("--kamino-xml", c.kamino_xml, {".xml"});
+  for (const auto& a : c.captures) note_report_input({"captures", a});
+  note_report_output({"-o", c.output});
   std::vector<std::filesystem::path> folders;
   for (const auto& a : c.captures) {
     const auto found = find_structured_light_captures(a);
@@ -496,6 +507,7 @@ CLI::App* add_calibrate_command(CLI::App& cmd, SlCommandOptions& c) {
                   "Capture folders (or folders of captures), one board pose each")
       ->required();
   cal->add_option("-o,--output", c.output, "Output calib.yml")->required();
+  add_report_option(*cal);
   cal->add_option("--kamino-xml", c.kamino_xml,
                   "Also write kamino410/procam-calibration's calibration_result.xml layout "
                   "(translation in millimetres)");
@@ -604,6 +616,7 @@ const CommandRegistrar kRegistrar{{
                       "Colour range of the residual maps, +- metres")
           ->default_val(0.005);
       c->mesh = add_mesh_option(*dec);
+      add_report_option(*dec);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
       auto* cal = add_calibrate_command(cmd, *c);
