@@ -49,7 +49,7 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     out.grid = OrganizedGrid{};
     out.normals.resize(kept.size());
     std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
-        si(kept.size());
+        si(kept.size()), dn(kept.size());
     parallel_each(kept.size(), [&](std::size_t k) {
       const std::uint32_t r = kept[k], s = cl.seed[r];
       out.positions[k] = cl.position[r] + origin;
@@ -59,12 +59,15 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       fl[k] = pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0;
       mc[k] = static_cast<double>(members(r));
       si[k] = src[s];
+      // How far the filter moved the point: from its seed's input position, along the normal.
+      dn[k] = (out.positions[k] - input.positions[src[s]]).dot(pr.normal[s].cast<double>());
     });
     out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
     out.set_attribute("iterations", AttributeType::kUInt8, std::move(it));
     out.set_attribute("flags", AttributeType::kUInt8, std::move(fl));
     out.set_attribute("merge_count", AttributeType::kUInt32, std::move(mc));
     out.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
+    out.set_attribute("displacement", AttributeType::kFloat32, std::move(dn));
     st.points_out = kept.size();
     for (std::uint32_t r : kept) st.merged += members(r) - 1;
   }
