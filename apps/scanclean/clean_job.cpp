@@ -18,6 +18,7 @@
 #include "scanclean/interrupt.h"
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
 #include "scanclean/provenance.h"
 #include "scanclean/run_report.h"
 #include "scanclean/summary.h"
@@ -180,8 +181,14 @@ std::string seconds_text(double s) {
 }  // namespace
 
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
-                  const std::filesystem::path& output, const std::filesystem::path& outliers) {
+                  const std::filesystem::path& output, const std::filesystem::path& outliers,
+                  const std::string& preview) {
   check_clean_outputs(command, options, {}, output, outliers);
+  if (!preview.empty() && options.raw)
+    throw OptionError(command + ": --preview needs the filter (it is off with --raw)");
+  check_preview_path(command, preview);
+  options.keep_input = !preview.empty();
+  std::string preview_text;  // the summary line, once the first window's preview is written
   validate(options);
   install_sigint_handler();
   options.keep_going = [] { return !interrupted(); };
@@ -225,6 +232,13 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     both.commit();
     note_report_output({"-o", p});
     if (!options.raw) note_report_filter(p.string(), w.filter);
+    if (!preview.empty() && preview_text.empty()) {
+      PreviewOptions po;
+      po.view = PreviewView::kCamera;
+      po.title = command_line();
+      preview_text =
+          preview_summary_text(preview, write_preview(preview, w.input, w.cloud, w.outliers, po));
+    }
     written.push_back(p);
   };
   const PipelineStats st = run_pipeline(
@@ -290,6 +304,7 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
                           " .. " + written.back().string());
   }
   if (!collapsed.empty()) sum.add_count("windows not written (collapsed)", collapsed.size());
+  if (!preview_text.empty()) sum.add("preview", preview_text);
   sum.print();
   if (st.stop == StopReason::kInterrupted) return static_cast<int>(ExitCode::kInterrupted);
   if (st.stop == StopReason::kError) {

@@ -18,6 +18,7 @@
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
 #include "scanclean/provenance.h"
 #include "scanclean/run_report.h"
 #include "scanclean/summary.h"
@@ -33,7 +34,8 @@ struct FilterCommandOptions {
   bool ascii = false;
   bool skip_missing = false;
   std::string xyz_columns;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;     // --mesh FILE
+  std::shared_ptr<std::string> preview;  // --preview FILE.png
 };
 
 void print_warnings(const std::string& file, const ReadReport& report) {
@@ -74,6 +76,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   if (!c.xyz_columns.empty()) xyz.columns = parse_xyz_columns(c.xyz_columns);
 
   check_mesh_output(*c.mesh, "filter");
+  check_preview_path("filter", *c.preview);
 
   PointCloud cloud;
   std::size_t files = 0;
@@ -160,6 +163,12 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
   note_report_filter(c.output, s);
+  if (!c.preview->empty() && !collapsed) {
+    PreviewOptions po;
+    po.title = command_line();
+    sum.add("preview", preview_summary_text(
+                           *c.preview, write_preview(*c.preview, cloud, r.cloud, r.outliers, po)));
+  }
   run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
   if (collapsed) {
@@ -199,6 +208,7 @@ const CommandRegistrar kRegistrar{{
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
       c->mesh = add_mesh_option(cmd);
       add_report_option(cmd);
+      c->preview = add_preview_option(cmd);
       auto values = add_filter_options(cmd);
       return [c, values] { return run_filter(*c, *values); };
     },

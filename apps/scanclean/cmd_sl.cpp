@@ -22,6 +22,7 @@
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
 #include "scanclean/mesh_handoff.h"
+#include "scanclean/preview.h"
 #include "scanclean/provenance.h"
 #include "scanclean/run_report.h"
 #include "scanclean/summary.h"
@@ -75,7 +76,8 @@ struct SlCommandOptions {
   int corner_window = 20;
   bool estimate_k3 = false;
   bool zero_tangential = false;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;                                       // --mesh FILE
+  std::shared_ptr<std::string> preview = std::make_shared<std::string>();  // --preview
 };
 
 //! The parent folder of an output must exist and the extension be one of `exts`.
@@ -218,6 +220,8 @@ int run_decode(const SlCommandOptions& c) {
   }
   check_output("-o", c.output, {".ply", ".pcd", ".xyz"});
   check_mesh_output(*c.mesh, "sl decode");
+  if (!c.preview->empty() && !c.filter) throw OptionError("sl decode: --preview needs --filter");
+  check_preview_path("sl decode", *c.preview);
   note_report_input({"capture", c.capture});
   if (!c.calib.empty()) note_report_input({"--calib", c.calib});
   note_report_output({"-o", c.output});
@@ -313,6 +317,13 @@ int run_decode(const SlCommandOptions& c) {
     validate(fo);
     FilterResult fr = robust_filter(cloud, fo);
     progress.finish();
+    if (!c.preview->empty()) {
+      PreviewOptions po;
+      po.view = PreviewView::kCamera;
+      po.title = command_line();
+      sum.add("preview", preview_summary_text(*c.preview, write_preview(*c.preview, cloud, fr.cloud,
+                                                                        fr.outliers, po)));
+    }
     note_report_filter(c.output, fr.stats);
     provenance = provenance_text(fr.stats.h, fr.stats.noise_sigma);
     sum.add("filter", with_thousands(fr.stats.points_out) + " points out, h " +
@@ -617,6 +628,7 @@ const CommandRegistrar kRegistrar{{
           ->default_val(0.005);
       c->mesh = add_mesh_option(*dec);
       add_report_option(*dec);
+      c->preview = add_preview_option(*dec);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
       auto* cal = add_calibrate_command(cmd, *c);
