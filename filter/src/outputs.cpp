@@ -1,5 +1,7 @@
 #include "outputs.h"
 
+#include <array>
+#include <cmath>
 #include <cstddef>
 
 #include "parallel.h"
@@ -62,6 +64,25 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       // How far the filter moved the point: from its seed's input position, along the normal.
       dn[k] = (out.positions[k] - input.positions[src[s]]).dot(pr.normal[s].cast<double>());
     });
+    if (input.has_colors()) {
+      // A merged point takes the mean colour of the input points it stands for (coincident
+      // copies count with their first copy's colour).
+      std::vector<std::array<double, 5>> acc(R, std::array<double, 5>{0, 0, 0, 0, 0});
+      for (std::size_t s = 0; s < N; ++s) {
+        const std::uint32_t r = cl.rep_of[s];
+        if (r == kNone || rep_drop[r] != Removal::kKept) continue;
+        const double m = static_cast<double>(mult(s));
+        const auto& c = input.colors[src[s]];
+        for (int ch = 0; ch < 4; ++ch) acc[r][ch] += m * c[ch];
+        acc[r][4] += m;
+      }
+      for (std::size_t k = 0; k < kept.size(); ++k) {
+        const auto& a = acc[kept[k]];
+        if (a[4] > 0)
+          for (int ch = 0; ch < 4; ++ch)
+            out.colors[k][ch] = static_cast<std::uint8_t>(std::lround(a[ch] / a[4]));
+      }
+    }
     out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
     out.set_attribute("iterations", AttributeType::kUInt8, std::move(it));
     out.set_attribute("flags", AttributeType::kUInt8, std::move(fl));

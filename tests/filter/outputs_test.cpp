@@ -46,3 +46,43 @@ TEST(FilterOutputsTest, DisplacementIsTheSignedMoveAlongTheNormal) {
 
 }  // namespace
 }  // namespace scanclean
+
+namespace scanclean {
+namespace {
+
+TEST(FilterOutputsTest, MergedPointsAverageTheirColours) {
+  // Every point of a plane twice, 1 micrometre apart, once red and once dark blue: each pair
+  // merges (merge eps is a quarter of the spacing) into one point of the mean colour.
+  const PointCloud base = test::noisy_plane(2000, 1.0, 0.002, 43);
+  PointCloud in;
+  for (std::size_t i = 0; i < base.size(); ++i) {
+    in.positions.push_back(base.positions[i]);
+    in.positions.push_back(base.positions[i] + Eigen::Vector3d(0, 0, 1e-6));
+    in.colors.push_back({200, 0, 0, 255});
+    in.colors.push_back({0, 0, 100, 255});
+  }
+  FilterOptions o;
+  o.threads = 2;
+  const FilterResult r = robust_filter(in, o);
+  ASSERT_TRUE(r.cloud.has_colors());
+  const Attribute* mc = r.cloud.find_attribute("merge_count");
+  ASSERT_NE(mc, nullptr);
+  std::size_t pairs = 0;
+  for (std::size_t k = 0; k < r.cloud.size(); ++k) {
+    if (mc->values[k] != 2) continue;
+    ++pairs;
+    const auto& c = r.cloud.colors[k];
+    ASSERT_EQ(c[0], 100) << "point " << k;
+    ASSERT_EQ(c[1], 0);
+    ASSERT_EQ(c[2], 50);
+    ASSERT_EQ(c[3], 255);
+  }
+  EXPECT_GT(pairs, 1500u);  // most pairs (a few points merge in threes or are removed)
+  // The removed points keep their own colour.
+  for (const auto& c : r.outliers.colors)
+    EXPECT_TRUE((c == std::array<std::uint8_t, 4>{200, 0, 0, 255}) ||
+                (c == std::array<std::uint8_t, 4>{0, 0, 100, 255}));
+}
+
+}  // namespace
+}  // namespace scanclean
