@@ -324,7 +324,8 @@ PreviewFacts write_preview(const fs::path& png, const PointCloud& before, const 
        by + bh + 18, 0.45);
 
   std::vector<uchar> bytes;
-  if (!cv::imencode(".png", out, bytes)) throw IoError(png.string() + ": cannot encode PNG");
+  if (!cv::imencode(".png", out, bytes, {cv::IMWRITE_PNG_COMPRESSION, 9}))
+    throw IoError(png.string() + ": cannot encode PNG");
   write_file_atomically(png, [&](std::ostream& os) {
     os.write(reinterpret_cast<const char*>(bytes.data()),
              static_cast<std::streamsize>(bytes.size()));
