@@ -92,6 +92,9 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
     ConfOptions conf_options;
     conf_options.skip_missing = c.skip_missing;
     PointCloud part = read_and_merge_conf(c.conf, &report, conf_options);
+    if (report_path())  // --report: the scans the session read, too
+      for (const auto& scan : read_conf(c.conf).files)
+        if (std::filesystem::exists(scan)) note_report_input({"--conf scan", scan});
     print_warnings(c.conf, report);
     append(cloud, part);
     ++files;

@@ -13,6 +13,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <utility>
 #include <vector>
 
 #include "scanclean/core/atomic_file.h"
@@ -28,7 +29,7 @@ namespace {
 
 const cv::Vec3b kBackground(38, 34, 32);  // BGR, dark
 const cv::Vec3b kRemoved(255, 0, 255);    // magenta
-constexpr int kBarHeight = 70;
+constexpr int kBarHeight = 96;
 constexpr int kTitleHeight = 30;
 
 // Maps a point to panel pixels and a depth (smaller = nearer).
@@ -164,9 +165,30 @@ class Canvas {
   //! gradient; `pixel_m(depth)` = the width of a pixel in metres at that depth), so that the
   //! shape and the noise show the same way in both panels.
   template <typename PixelSize>
-  void shade_by_depth(PixelSize pixel_m) {
-    const cv::Mat z = z_.clone();
+  void shade_by_depth(PixelSize pixel_m, int splat_radius) {
     const float far = std::numeric_limits<float>::max();
+    // The depth smoothed over about a splat (neighbours on the same surface only: within a few
+    // pixel widths in depth), so that the flat squares' edges do not read as steps.
+    cv::Mat z = z_.clone();
+    const int k = splat_radius;
+    for (int y = 0; y < img_.rows; ++y)
+      for (int x = 0; x < img_.cols; ++x) {
+        const float zc = z_.at<float>(y, x);
+        if (zc == far) continue;
+        const double tol = 3.0 * (2 * k + 1) * pixel_m(zc);
+        double sum = 0;
+        int n = 0;
+        for (int dy = -k; dy <= k; ++dy)
+          for (int dx = -k; dx <= k; ++dx) {
+            const int yy = y + dy, xx = x + dx;
+            if (yy < 0 || xx < 0 || yy >= img_.rows || xx >= img_.cols) continue;
+            const float zn = z_.at<float>(yy, xx);
+            if (zn == far || std::abs(zn - zc) > tol) continue;
+            sum += zn;
+            ++n;
+          }
+        z.at<float>(y, x) = static_cast<float>(sum / n);
+      }
     for (int y = 1; y + 1 < img_.rows; ++y)
       for (int x = 1; x + 1 < img_.cols; ++x) {
         const float zc = z.at<float>(y, x);
@@ -221,6 +243,43 @@ std::string lower(std::string s) {
   return s;
 }
 
+// The two panels from one viewpoint: the input in grey with the removed points on top, and
+// the output coloured by displacement; both shaded by their depth buffers.
+std::pair<cv::Mat, cv::Mat> render_pair(const Projector& pr, const PointCloud& before,
+                                        const PointCloud& after, const PointCloud& removed,
+                                        const Attribute* disp, double range_m,
+                                        const PreviewOptions& o) {
+  const int W = o.panel_width, H = o.panel_height;
+  // Left: the input, grey, and the removed points on top.
+  Canvas left(W, H);
+  const int r_before = splat_radius(pr, before, o);
+  for (std::size_t i = 0; i < before.size(); ++i) {
+    double u, v, d;
+    if (!pr.project(before.positions[i], u, v, d)) continue;
+    left.splat(u, v, d, r_before, cv::Vec3b(200, 200, 200), true);
+  }
+  auto pixel_m = [&pr](float depth) {
+    return pr.view == PreviewView::kCamera ? depth / pr.scale : 1.0 / pr.scale;
+  };
+  left.shade_by_depth(pixel_m, r_before);
+  for (const auto& p : removed.positions) {
+    double u, v, d;
+    if (pr.project(p, u, v, d)) left.splat(u, v, d, std::max(1, r_before), kRemoved, false);
+  }
+  // Right: the output coloured by displacement.
+  Canvas right(W, H);
+  const int r_after = splat_radius(pr, after, o);
+  for (std::size_t i = 0; i < after.size(); ++i) {
+    double u, v, d;
+    if (!pr.project(after.positions[i], u, v, d)) continue;
+    const double t = disp ? disp->values[i] / range_m : 0.0;
+    right.splat(u, v, d, r_after, diverging(t), true);
+  }
+  right.shade_by_depth(pixel_m, r_after);
+
+  return {left.image(), right.image()};
+}
+
 }  // namespace
 
 std::shared_ptr<std::string> add_preview_option(CLI::App& cmd) {
@@ -269,36 +328,26 @@ PreviewFacts write_preview(const fs::path& png, const PointCloud& before, const 
   facts.range_m = std::max(percentile(mag, 0.98), 1e-9);
   facts.median_abs_m = percentile(mag, 0.5);
 
-  // Left: the input, grey, and the removed points on top.
-  Canvas left(W, H);
-  const int r_before = splat_radius(pr, before, o);
-  for (std::size_t i = 0; i < before.size(); ++i) {
-    double u, v, d;
-    if (!pr.project(before.positions[i], u, v, d)) continue;
-    left.splat(u, v, d, r_before, cv::Vec3b(200, 200, 200), true);
-  }
-  auto pixel_m = [&pr](float depth) {
-    return pr.view == PreviewView::kCamera ? depth / pr.scale : 1.0 / pr.scale;
-  };
-  left.shade_by_depth(pixel_m);
-  for (const auto& p : removed.positions) {
-    double u, v, d;
-    if (pr.project(p, u, v, d)) left.splat(u, v, d, std::max(1, r_before), kRemoved, false);
-  }
-  // Right: the output coloured by displacement.
-  Canvas right(W, H);
-  const int r_after = splat_radius(pr, after, o);
-  for (std::size_t i = 0; i < after.size(); ++i) {
-    double u, v, d;
-    if (!pr.project(after.positions[i], u, v, d)) continue;
-    const double t = disp ? disp->values[i] / facts.range_m : 0.0;
-    right.splat(u, v, d, r_after, diverging(t), true);
-  }
-  right.shade_by_depth(pixel_m);
+  const auto [left, right] = render_pair(pr, before, after, removed, disp, facts.range_m, o);
+  // The detail: the panels' central third, magnified 3x (the same renderer, zoomed).
+  constexpr int kZoom = 3;
+  Projector zoomed = pr;
+  zoomed.scale = pr.scale * kZoom;
+  zoomed.u0 = kZoom * pr.u0 - (kZoom - 1) * W / 2.0;
+  zoomed.v0 = kZoom * pr.v0 - (kZoom - 1) * H / 2.0;
+  const auto [left_zoom, right_zoom] =
+      render_pair(zoomed, before, after, removed, disp, facts.range_m, o);
 
-  cv::Mat out(kTitleHeight + H + kBarHeight, 2 * W + 6, CV_8UC3, cv::Scalar(20, 20, 20));
-  left.image().copyTo(out(cv::Rect(0, kTitleHeight, W, H)));
-  right.image().copyTo(out(cv::Rect(W + 6, kTitleHeight, W, H)));
+  const int row2 = kTitleHeight + H + kTitleHeight;  // top of the detail panels
+  cv::Mat out(row2 + H + kBarHeight, 2 * W + 6, CV_8UC3, cv::Scalar(20, 20, 20));
+  left.copyTo(out(cv::Rect(0, kTitleHeight, W, H)));
+  right.copyTo(out(cv::Rect(W + 6, kTitleHeight, W, H)));
+  left_zoom.copyTo(out(cv::Rect(0, row2, W, H)));
+  right_zoom.copyTo(out(cv::Rect(W + 6, row2, W, H)));
+  const cv::Rect detail(W / 2 - W / (2 * kZoom), kTitleHeight + H / 2 - H / (2 * kZoom), W / kZoom,
+                        H / kZoom);
+  for (int x0 : {0, W + 6})
+    cv::rectangle(out, detail + cv::Point(x0, 0), cv::Scalar(0, 215, 255), 1);
   text(out,
        "before: " + with_thousands(facts.before) + " points, " + with_thousands(facts.removed) +
            " removed (magenta)",
@@ -307,9 +356,9 @@ PreviewFacts write_preview(const fs::path& png, const PointCloud& before, const 
        "after: " + with_thousands(facts.after) +
            " points, coloured by displacement along the normal",
        W + 14, 20);
-  if (!o.title.empty()) text(out, o.title, 8, kTitleHeight + H - 10, 0.45);
+  text(out, "detail: the framed centre, magnified 3x", 8, kTitleHeight + H + 20);
   // Colour bar with its units.
-  const int bx = W + 6 + 40, bw = W - 80, by = kTitleHeight + H + 12, bh = 16;
+  const int bx = W + 6 + 40, bw = W - 80, by = row2 + H + 12, bh = 16;
   for (int x = 0; x < bw; ++x) {
     const double t = 2.0 * x / (bw - 1) - 1.0;
     cv::line(out, cv::Point(bx + x, by), cv::Point(bx + x, by + bh), cv::Scalar(diverging(t)));
@@ -322,6 +371,7 @@ PreviewFacts write_preview(const fs::path& png, const PointCloud& before, const 
        bx + bw / 2 - 170, by + bh + 38, 0.45);
   text(out, "view: " + std::string(o.view == PreviewView::kCamera ? "camera" : "orthographic"), 8,
        by + bh + 18, 0.45);
+  if (!o.title.empty()) text(out, o.title, 8, out.rows - 8, 0.42);
 
   std::vector<uchar> bytes;
   if (!cv::imencode(".png", out, bytes, {cv::IMWRITE_PNG_COMPRESSION, 9}))

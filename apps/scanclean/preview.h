@@ -4,7 +4,9 @@
 //! normals when it has them) with the removed points marked in magenta on top; right the
 //! filtered points coloured by their "displacement" attribute (signed move along the normal,
 //! blue - grey - red over +-the 98th percentile of |displacement|), under a colour bar in
-//! millimetres. Rendered with OpenCV (z-buffered square splats); OpenCV stays in preview.cpp.
+//! millimetres. Below them the same two panels, magnified 3x about the centre (framed in the
+//! whole view), where the smoothing shows. Rendered with OpenCV (z-buffered square splats); OpenCV
+//! stays in preview.cpp.
 
 #include <CLI/CLI.hpp>
 #include <filesystem>

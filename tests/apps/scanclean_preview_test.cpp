@@ -29,7 +29,7 @@ struct Counts {
 
 Counts count_colours(const cv::Mat& img, int x0, int x1) {
   Counts c;
-  for (int y = 30; y < img.rows - 70; ++y)
+  for (int y = 30; y < img.rows - 96; ++y)
     for (int x = x0; x < x1; ++x) {
       const cv::Vec3b p = img.at<cv::Vec3b>(y, x);  // BGR
       if (p[0] == 255 && p[1] == 0 && p[2] == 255) ++c.magenta;
@@ -54,7 +54,7 @@ TEST(ScancleanPreviewTest, FilterPreviewShowsRemovedPointsAndDisplacementBothWay
   const cv::Mat img = cv::imread(png.string(), cv::IMREAD_COLOR);
   ASSERT_FALSE(img.empty()) << "not a readable PNG";
   EXPECT_EQ(img.cols, 2 * 720 + 6);
-  EXPECT_EQ(img.rows, 30 + 540 + 70);
+  EXPECT_EQ(img.rows, 2 * (30 + 540) + 96);  // the whole view and a 3x detail
   const Counts left = count_colours(img, 0, 720), right = count_colours(img, 726, img.cols);
   EXPECT_GT(left.magenta, 20u) << "the removed points are not marked";
   EXPECT_EQ(right.magenta, 0u);
@@ -74,6 +74,30 @@ TEST(ScancleanPreviewTest, BadPreviewPathStopsBeforeAnyWork) {
   r = run({"filter", in, "-o", out, "--preview", (dir / "nope" / "p.png").string()}, dir);
   EXPECT_EQ(r.exit_code, 4) << r.err;
   EXPECT_FALSE(fs::exists(out));
+}
+
+TEST(ScancleanColourTest, OrganizedPcdColoursReachTheFilteredOutput) {
+  const fs::path pcd =
+      test::shared_data_dir() / "pcl_test_clouds/table_scene_mug_stereo_textured.pcd";
+  if (!fs::exists(pcd)) GTEST_SKIP() << "shared data not available: " << pcd;
+  const auto dir = test::make_temp_dir("colour");
+  const fs::path out = dir / "clean.ply";
+  const auto r = run({"filter", pcd.string(), "-o", out.string(), "--threads", "2"}, dir);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const PointCloud in = read_point_cloud(pcd), clean = read_point_cloud(out);
+  ASSERT_TRUE(in.has_colors());
+  ASSERT_TRUE(clean.has_colors());
+  const Attribute* src = clean.find_attribute("source_index");
+  const Attribute* mc = clean.find_attribute("merge_count");
+  ASSERT_NE(src, nullptr);
+  ASSERT_NE(mc, nullptr);
+  std::size_t single = 0;
+  for (std::size_t k = 0; k < clean.size(); ++k) {
+    if (mc->values[k] != 1) continue;  // merged points carry their members' mean colour
+    ++single;
+    ASSERT_EQ(clean.colors[k], in.colors[static_cast<std::size_t>(src->values[k])]) << k;
+  }
+  EXPECT_GT(single, clean.size() / 2);
 }
 
 #if defined(SCANCLEAN_HAVE_FILTER)
