@@ -262,9 +262,13 @@ std::pair<cv::Mat, cv::Mat> render_pair(const Projector& pr, const PointCloud& b
     return pr.view == PreviewView::kCamera ? depth / pr.scale : 1.0 / pr.scale;
   };
   left.shade_by_depth(pixel_m, r_before);
+  // Removed points drawn a size smaller when they are many (more than 2 % of the input), so
+  // that they mark the surface instead of hiding it.
+  const int r_removed =
+      removed.size() * 50 > before.size() ? std::max(0, r_before - 1) : std::max(1, r_before);
   for (const auto& p : removed.positions) {
     double u, v, d;
-    if (pr.project(p, u, v, d)) left.splat(u, v, d, std::max(1, r_before), kRemoved, false);
+    if (pr.project(p, u, v, d)) left.splat(u, v, d, r_removed, kRemoved, false);
   }
   // Right: the output coloured by displacement.
   Canvas right(W, H);
