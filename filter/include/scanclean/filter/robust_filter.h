@@ -103,9 +103,10 @@ struct FilterStats {
 //! when the input has them;
 //! attributes "likelihood" float32, "iterations" uint8, "flags" uint8, "merge_count" uint32,
 //! "source_index" uint32, "displacement" float32: metres from the representative's input point
-//! along the output normal, signed, positive where the point moved along the normal). outliers: every dropped input point at its input position, with the
-//! input's optional arrays and the attributes "flags" (uint8) and "source_index" (uint32).
-//! Invariant: sum of merge_count over cloud + outliers.size() == input.size().
+//! along the output normal, signed, positive where the point moved along the normal). outliers:
+//! every dropped input point at its input position, with the input's optional arrays and the
+//! attributes "flags" (uint8) and "source_index" (uint32). Invariant: sum of merge_count over cloud
+//! + outliers.size() == input.size().
 struct FilterResult {
   PointCloud cloud;
   PointCloud outliers;
