@@ -16,7 +16,9 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/pipeline/pipeline.h"
+#include "scanclean/preview.h"
 #include "scanclean/replay/recording_source.h"
+#include "scanclean/run_report.h"
 
 namespace scanclean::app {
 
@@ -31,6 +33,7 @@ struct CaptureCommandOptions {
   double seconds = 0;
   int reconnect = 0;
   bool depth_100um = false;
+  std::shared_ptr<std::string> preview;  // --preview FILE.png
 };
 
 int run_capture(const CaptureCommandOptions& c, const std::function<void(PipelineOptions&)>& apply,
@@ -46,7 +49,7 @@ int run_capture(const CaptureCommandOptions& c, const std::function<void(Pipelin
   check_clean_outputs("capture", o, c.source, c.output, c.outliers);
   std::unique_ptr<RangeSource> source = make_range_source(c.source, so);
   if (!c.record.empty()) source = make_recording_source(std::move(source), c.record);
-  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers);
+  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers, *c.preview);
   source.reset();  // finishes the recording folder (if any)
   if (!c.record.empty())
     std::fprintf(stderr, "scanclean capture: raw frames recorded in %s\n", c.record.c_str());
@@ -94,6 +97,8 @@ const CommandRegistrar kRegistrar{{
           "(nothing written), 130 interrupted.");
       auto apply = add_clean_options(cmd);
       auto intrinsics = add_intrinsics_options(cmd);
+      add_report_option(cmd);
+      c->preview = add_preview_option(cmd);
       return [c, apply, intrinsics] { return run_capture(*c, apply, intrinsics); };
     },
 }};

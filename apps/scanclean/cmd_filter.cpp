@@ -18,6 +18,9 @@
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -31,7 +34,8 @@ struct FilterCommandOptions {
   bool ascii = false;
   bool skip_missing = false;
   std::string xyz_columns;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;     // --mesh FILE
+  std::shared_ptr<std::string> preview;  // --preview FILE.png
 };
 
 void print_warnings(const std::string& file, const ReadReport& report) {
@@ -72,6 +76,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   if (!c.xyz_columns.empty()) xyz.columns = parse_xyz_columns(c.xyz_columns);
 
   check_mesh_output(*c.mesh, "filter");
+  check_preview_path("filter", *c.preview);
 
   PointCloud cloud;
   std::size_t files = 0;
@@ -87,6 +92,9 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
     ConfOptions conf_options;
     conf_options.skip_missing = c.skip_missing;
     PointCloud part = read_and_merge_conf(c.conf, &report, conf_options);
+    if (report_path())  // --report: the scans the session read, too
+      for (const auto& scan : read_conf(c.conf).files)
+        if (std::filesystem::exists(scan)) note_report_input({"--conf scan", scan});
     print_warnings(c.conf, report);
     append(cloud, part);
     ++files;
@@ -104,6 +112,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   const bool collapsed = (r.cloud.empty() && r.stats.points_in >= 1) ||
                          (r.cloud.size() == 1 && r.stats.points_in >= 2);
   if (!collapsed) {
+    w.provenance = provenance_text(r.stats.h, r.stats.noise_sigma);
     AtomicCommitGroup both;  // the cleaned cloud and the outliers, or neither
     write_point_cloud(c.output, r.cloud, w);
     if (!c.outliers.empty()) write_point_cloud(c.outliers, r.outliers, w);
@@ -156,6 +165,13 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
                                          s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
+  note_report_filter(c.output, s);
+  if (!c.preview->empty() && !collapsed) {
+    PreviewOptions po;
+    po.title = command_line();
+    sum.add("preview", preview_summary_text(
+                           *c.preview, write_preview(*c.preview, cloud, r.cloud, r.outliers, po)));
+  }
   run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
   if (collapsed) {
@@ -194,6 +210,8 @@ const CommandRegistrar kRegistrar{{
                      "default: guessed from the first line (see scanclean info)");
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
       c->mesh = add_mesh_option(cmd);
+      add_report_option(cmd);
+      c->preview = add_preview_option(cmd);
       auto values = add_filter_options(cmd);
       return [c, values] { return run_filter(*c, *values); };
     },

@@ -23,6 +23,9 @@
 #include "scanclean/drivers/structured_light_source.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -74,7 +77,8 @@ struct SlCommandOptions {
   int corner_window = 20;
   bool estimate_k3 = false;
   bool zero_tangential = false;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;                                       // --mesh FILE
+  std::shared_ptr<std::string> preview = std::make_shared<std::string>();  // --preview
 };
 
 //! The extension of an output must be one of `exts`; its folder must exist and be writable,
@@ -215,6 +219,11 @@ int run_decode(const SlCommandOptions& c) {
   }
   check_output("sl decode", "-o", c.output, {".ply", ".pcd", ".xyz"});
   check_mesh_output(*c.mesh, "sl decode");
+  if (!c.preview->empty() && !c.filter) throw OptionError("sl decode: --preview needs --filter");
+  check_preview_path("sl decode", *c.preview);
+  note_report_input({"capture", c.capture});
+  if (!c.calib.empty()) note_report_input({"--calib", c.calib});
+  note_report_output({"-o", c.output});
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
     throw InputError(c.capture, "",
@@ -227,6 +236,7 @@ int run_decode(const SlCommandOptions& c) {
   const SlResult r = process_sl_capture(c.capture, o);
   std::string how;
   PointCloud cloud = frame_cloud(r.frame, &how);
+  std::string provenance = provenance_text();  // with the filter's h when it runs
 
   Summary sum("scanclean sl decode");
   sum.add("capture", c.capture + " (" + r.info.layout + " layout)");
@@ -306,6 +316,15 @@ int run_decode(const SlCommandOptions& c) {
     validate(fo);
     FilterResult fr = robust_filter(cloud, fo);
     progress.finish();
+    if (!c.preview->empty()) {
+      PreviewOptions po;
+      po.view = PreviewView::kCamera;
+      po.title = command_line();
+      sum.add("preview", preview_summary_text(*c.preview, write_preview(*c.preview, cloud, fr.cloud,
+                                                                        fr.outliers, po)));
+    }
+    note_report_filter(c.output, fr.stats);
+    provenance = provenance_text(fr.stats.h, fr.stats.noise_sigma);
     sum.add("filter", with_thousands(fr.stats.points_out) + " points out, h " +
                           std::to_string(fr.stats.h * 1e3).substr(0, 6) + " mm, " +
                           std::to_string(fr.stats.seconds_total).substr(0, 5) + " s");
@@ -330,6 +349,7 @@ int run_decode(const SlCommandOptions& c) {
     w.ply_encoding = PlyEncoding::kAscii;
     w.pcd_encoding = "ascii";
   }
+  w.provenance = provenance;
   write_point_cloud(c.output, cloud, w);
   sum.add("output file", c.output + " (metres, camera frame)");
   run_mesh_handoff(*c.mesh, cloud, 0.0, sum);
@@ -385,6 +405,7 @@ int run_calibrate(const SlCommandOptions& c) {
     check_output_files("sl calibrate", references,
                        {{"-o", c.output}, {"--kamino-xml", c.kamino_xml}}, false);
   }
+  for (const auto& a : c.captures) note_report_input({"captures", a});
   std::vector<std::filesystem::path> folders;
   for (const auto& a : c.captures) {
     const auto found = find_structured_light_captures(a);
@@ -500,6 +521,7 @@ CLI::App* add_calibrate_command(CLI::App& cmd, SlCommandOptions& c) {
                   "Capture folders (or folders of captures), one board pose each")
       ->required();
   cal->add_option("-o,--output", c.output, "Output calib.yml")->required();
+  add_report_option(*cal);
   cal->add_option("--kamino-xml", c.kamino_xml,
                   "Also write kamino410/procam-calibration's calibration_result.xml layout "
                   "(translation in millimetres)");
@@ -608,6 +630,8 @@ const CommandRegistrar kRegistrar{{
                       "Colour range of the residual maps, +- metres")
           ->default_val(0.005);
       c->mesh = add_mesh_option(*dec);
+      add_report_option(*dec);
+      c->preview = add_preview_option(*dec);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
       auto* cal = add_calibrate_command(cmd, *c);

@@ -99,6 +99,7 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     if (options.raw) {
       out.cloud = std::move(merged);
     } else {
+      if (options.keep_input) out.input = merged;
       const auto t = Clock::now();
       FilterResult r = robust_filter(merged, options.filter);
       st.seconds_filter += seconds_since(t);

@@ -234,7 +234,8 @@ named like the fields of scanclean::FilterOptions (see default_filter_options())
 scale= selects scale="fixed" and k_adaptive= selects "adaptive", like the program's --h / --k.
 progress: optional callable(phase: str, fraction: float).
 
-Returns a dict: points, normals, likelihood, iterations, flags, merge_count, source_index (and
+Returns a dict: points, normals, likelihood, iterations, flags, merge_count, source_index,
+displacement (metres moved along the normal; and
 the input's colours, intensities, confidences), "outliers" (the dropped input points with
 flags and source_index) and "stats" (FilterStats as a dict).)doc");
   m.def(

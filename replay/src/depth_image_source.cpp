@@ -390,6 +390,33 @@ std::optional<std::int64_t> timestamp_from_name(const std::string& stem) {
   return std::nullopt;
 }
 
+//! The colour image that belongs to a depth image, if there is one: in a depth/ folder, the
+//! file of the same stem in a sibling color/, colour/ or rgb/ folder (Redwood, slambook);
+//! otherwise the file whose name has "color", "colour" or "rgb" where the depth's has "depth"
+//! (Open3D's TUM_depth.png / TUM_color.png, NYU_depth.pgm / NYU_color.ppm).
+std::optional<fs::path> colour_beside(const fs::path& depth) {
+  static const char* const kExt[] = {".png", ".jpg", ".jpeg", ".ppm", ".PNG", ".JPG"};
+  std::error_code ec;
+  const fs::path dir = depth.parent_path();
+  if (lower(dir.filename().string()) == "depth") {
+    for (const char* sub : {"color", "colour", "rgb"})
+      for (const char* e : kExt) {
+        const fs::path c = dir.parent_path() / sub / (depth.stem().string() + e);
+        if (fs::is_regular_file(c, ec)) return c;
+      }
+  }
+  const std::string name = depth.stem().string();
+  const std::string low = lower(name);
+  const auto at = low.find("depth");
+  if (at == std::string::npos) return std::nullopt;
+  for (const char* word : {"color", "colour", "rgb"})
+    for (const char* e : kExt) {
+      const fs::path c = dir / (name.substr(0, at) + word + name.substr(at + 5) + e);
+      if (fs::is_regular_file(c, ec)) return c;
+    }
+  return std::nullopt;
+}
+
 class DepthImageSource final : public RangeSource {
  public:
   DepthImageSource(fs::path path, std::vector<fs::path> files, DepthImageOptions options)
@@ -469,11 +496,42 @@ class DepthImageSource final : public RangeSource {
       timestamps_us_.push_back(*t);
     }
 
+    // Colour images beside the depth images: used when every depth image has one of its size.
+    colour_files_.clear();
+    std::string colour_note;
+    for (const fs::path& f : files_) {
+      auto c = colour_beside(f);
+      if (!c) {
+        colour_files_.clear();
+        break;
+      }
+      colour_files_.push_back(*c);
+    }
+    std::vector<std::string> warnings;
+    if (!colour_files_.empty()) {
+      const auto rgb = detail::read_rgb_image(colour_files_.front());
+      if (rgb.width != width_ || rgb.height != height_) {
+        warnings.push_back(colour_files_.front().string() + ": colour image is " +
+                           std::to_string(rgb.width) + "x" + std::to_string(rgb.height) +
+                           ", the depth " + std::to_string(width_) + "x" + std::to_string(height_) +
+                           " (not registered); colour not used");
+        colour_files_.clear();
+      } else {
+        colour_note = "; colour from " + colour_files_.front().filename().string() +
+                      (colour_files_.size() > 1 ? " ..." : "");
+        if (encoding_ == Encoding::kNyu)
+          warnings.push_back(colour_files_.front().string() +
+                             ": NYU raw colour is not registered to the depth camera; the "
+                             "points' colours are offset by a few pixels");
+      }
+    }
+
     SourceInfo info;
+    info.warnings = std::move(warnings);
     info.uri = path_.string();
     info.kind = "depth-images";
     info.name = std::string(encoding_name(encoding_)) + ": " + describe() + "; " + why +
-                "; intrinsics from " + k_origin_;
+                "; intrinsics from " + k_origin_ + colour_note;
     info.is_live = false;
     info.frame_count = files_.size();
     info.K = K_;
@@ -513,6 +571,15 @@ class DepthImageSource final : public RangeSource {
       for (std::size_t k = 0; k < src.data.size(); ++k) f.depth.data[k] = nyu_to_mm(src.data[k]);
     } else {
       f.depth = src;
+    }
+    if (!colour_files_.empty()) {
+      auto rgb = detail::read_rgb_image(colour_files_[next_]);
+      if (rgb.width != width_ || rgb.height != height_)
+        throw InputError(colour_files_[next_].string(), "",
+                         "colour image is " + std::to_string(rgb.width) + "x" +
+                             std::to_string(rgb.height) + ", the depth image " +
+                             std::to_string(width_) + "x" + std::to_string(height_));
+      f.color = std::move(rgb);
     }
     frame = std::move(f);
     ++next_;
@@ -605,6 +672,7 @@ class DepthImageSource final : public RangeSource {
   bool pgm_le_auto_ = false;
   int width_ = 0, height_ = 0;
   std::vector<std::int64_t> timestamps_us_;
+  std::vector<fs::path> colour_files_;  //!< per depth image; empty = no colour
   std::optional<Raw16> first_;
   std::size_t next_ = 0;
   SourceInfo info_;

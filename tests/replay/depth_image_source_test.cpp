@@ -88,6 +88,36 @@ TEST(DepthImageSourceTest, TumPngAutoDetectedAt5000PerMetre) {
   EXPECT_EQ(frames[0].K.height, 480);
 }
 
+TEST(DepthImageSourceTest, ColourImagesBesideTheDepthBecomeTheFramesColour) {
+  SCANCLEAN_REQUIRE_SHARED("rgbd_frames/open3d_tum_sample/TUM_color.png");
+  SCANCLEAN_REQUIRE_SHARED("rgbd_frames/redwood_livingroom1_synthetic/color/00000.jpg");
+  // TUM_depth.png + TUM_color.png (same folder), Redwood depth/ + color/ (sibling folders).
+  const fs::path tum = test::shared_data_dir() / "rgbd_frames/open3d_tum_sample";
+  auto src = make_depth_image_source(tum / "TUM_depth.png", with_k(525, 525, 319.5, 239.5));
+  src->open();
+  EXPECT_NE(src->info().name.find("colour from TUM_color.png"), std::string::npos)
+      << src->info().name;
+  const auto frames = read_all(*src);
+  ASSERT_EQ(frames.size(), 1u);
+  ASSERT_TRUE(frames[0].color.has_value());
+  const cv::Mat bgr = cv::imread((tum / "TUM_color.png").string(), cv::IMREAD_COLOR);
+  ASSERT_EQ(frames[0].color->width, bgr.cols);
+  for (const auto& [u, v] : {std::pair{0, 0}, std::pair{320, 240}, std::pair{639, 479}}) {
+    const cv::Vec3b p = bgr.at<cv::Vec3b>(v, u);
+    const auto& c = (*frames[0].color)(u, v);
+    EXPECT_EQ(c[0], p[2]);
+    EXPECT_EQ(c[1], p[1]);
+    EXPECT_EQ(c[2], p[0]);
+  }
+  auto redwood = make_depth_image_source(
+      test::shared_data_dir() / "rgbd_frames/redwood_livingroom1_synthetic", {});
+  redwood->open();
+  RangeFrame f;
+  ASSERT_EQ(redwood->next(f, 0ms), ReadStatus::kOk);
+  ASSERT_TRUE(f.color.has_value());
+  EXPECT_EQ(f.color->width, f.depth.width);
+}
+
 TEST(DepthImageSourceTest, SlambookBigEndianPgmInMillimetres) {
   SCANCLEAN_REQUIRE_SHARED("rgbd_frames/slambook_joinmap/depth/1.pgm");
   // The folder has color/ and depth/; the source finds depth/ and orders 1..5 numerically.

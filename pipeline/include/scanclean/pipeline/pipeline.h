@@ -42,6 +42,9 @@ struct PipelineOptions {
   bool fuse = true;
   FrameToPointsOptions points;
   FilterOptions filter;
+  //! Keep each window's points as they went into the filter in WindowOutput::input (e.g. for a
+  //! before/after preview).
+  bool keep_input = false;
   //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
   std::function<bool()> keep_going;
   //! Called after each used frame (frames used so far). Optional.
@@ -71,6 +74,7 @@ struct WindowOutput {
   PointCloud cloud;     //!< cleaned (or raw) points
   PointCloud outliers;  //!< points the filter removed (empty when raw)
   FilterStats filter;   //!< zero when raw
+  PointCloud input;     //!< the filter's input, only with PipelineOptions::keep_input
 };
 
 struct PipelineStats {
