@@ -5,6 +5,7 @@
 #include <cmath>
 #include <ctime>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -417,6 +418,55 @@ std::optional<fs::path> colour_beside(const fs::path& depth) {
   return std::nullopt;
 }
 
+//! TUM RGB-D sequences: depth/<t>.png and rgb/<t'>.png are taken at different instants, so
+//! their names differ. Each depth image gets the colour image of the sibling rgb/ (or color/)
+//! folder nearest to it in time, when that is within 20 ms (the dataset's association rule; its
+//! depth is registered to the colour camera). Empty unless every depth image has one.
+std::vector<fs::path> colour_by_timestamp(const std::vector<fs::path>& depth_files) {
+  constexpr std::int64_t kMaxDifferenceUs = 20'000;
+  if (depth_files.empty()) return {};
+  const fs::path dir = depth_files.front().parent_path();
+  if (lower(dir.filename().string()) != "depth") return {};
+  std::error_code ec;
+  std::vector<std::pair<std::int64_t, fs::path>> colour;  // by time
+  for (const char* sub : {"rgb", "color", "colour"}) {
+    const fs::path cdir = dir.parent_path() / sub;
+    if (!fs::is_directory(cdir, ec)) continue;
+    for (const auto& e : fs::directory_iterator(cdir, ec)) {
+      const std::string ext = lower(e.path().extension().string());
+      if (!e.is_regular_file(ec) || (ext != ".png" && ext != ".jpg" && ext != ".jpeg")) continue;
+      if (const auto t = timestamp_from_name(e.path().stem().string()))
+        colour.emplace_back(*t, e.path());
+    }
+    if (!colour.empty()) break;
+  }
+  if (colour.empty()) return {};
+  std::sort(colour.begin(), colour.end());
+  std::vector<fs::path> out;
+  out.reserve(depth_files.size());
+  for (const fs::path& d : depth_files) {
+    if (d.parent_path() != dir) return {};
+    const auto t = timestamp_from_name(d.stem().string());
+    if (!t) return {};
+    auto it = std::lower_bound(colour.begin(), colour.end(), *t,
+                               [](const auto& c, std::int64_t v) { return c.first < v; });
+    std::int64_t best = std::numeric_limits<std::int64_t>::max();
+    const fs::path* nearest = nullptr;
+    const auto consider = [&](const std::pair<std::int64_t, fs::path>& c) {
+      const std::int64_t dt = c.first > *t ? c.first - *t : *t - c.first;
+      if (dt < best) {
+        best = dt;
+        nearest = &c.second;
+      }
+    };
+    if (it != colour.end()) consider(*it);
+    if (it != colour.begin()) consider(*std::prev(it));
+    if (!nearest || best > kMaxDifferenceUs) return {};
+    out.push_back(*nearest);
+  }
+  return out;
+}
+
 class DepthImageSource final : public RangeSource {
  public:
   DepthImageSource(fs::path path, std::vector<fs::path> files, DepthImageOptions options)
@@ -507,6 +557,7 @@ class DepthImageSource final : public RangeSource {
       }
       colour_files_.push_back(*c);
     }
+    if (colour_files_.empty()) colour_files_ = colour_by_timestamp(files_);
     std::vector<std::string> warnings;
     if (!colour_files_.empty()) {
       const auto rgb = detail::read_rgb_image(colour_files_.front());

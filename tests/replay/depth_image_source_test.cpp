@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <opencv2/core.hpp>
@@ -330,6 +331,47 @@ TEST(DepthImageSourceTest, NaturalOrderAndTumTimestamps) {
   EXPECT_EQ(frames[0].device_ts_us, 1305031102160407LL);
   EXPECT_EQ(frames[1].device_ts_us - frames[0].device_ts_us, 33923);
   EXPECT_EQ(frames[2].device_ts_us - frames[1].device_ts_us, 32408);
+  fs::remove_all(dir);
+}
+
+// A TUM RGB-D sequence: depth/ and rgb/ named by their own timestamps. Each depth image takes
+// the colour image nearest in time (within 20 ms); one farther away means no colour at all.
+TEST(DepthImageSourceTest, TumSequenceColourPairedByTimestamp) {
+  const auto dir = test::make_temp_dir("tum_seq");
+  fs::create_directories(dir / "depth");
+  fs::create_directories(dir / "rgb");
+  const auto v = ramp(8, 6, 20000, 5, 0);
+  const cv::Mat depth(6, 8, CV_16UC1, const_cast<std::uint16_t*>(v.data()));
+  for (const char* n : {"1305031102.160407.png", "1305031102.194330.png"})
+    ASSERT_TRUE(cv::imwrite((dir / "depth" / n).string(), depth));
+  // Colour frames 5 ms before, 8 ms after and 1 s after: blue, green and red (BGR on disk).
+  const std::vector<std::pair<std::string, cv::Scalar>> rgb = {
+      {"1305031102.155001.png", {255, 0, 0}},
+      {"1305031102.202330.png", {0, 255, 0}},
+      {"1305031103.202330.png", {0, 0, 255}}};
+  for (const auto& [n, bgr] : rgb)
+    ASSERT_TRUE(cv::imwrite((dir / "rgb" / n).string(), cv::Mat(6, 8, CV_8UC3, bgr)));
+  {
+    auto src = make_depth_image_source(dir, with_k(500, 500, 4, 3));
+    src->open();
+    EXPECT_NE(src->info().name.find("colour from 1305031102.155001.png"), std::string::npos)
+        << src->info().name;
+    const auto frames = read_all(*src);
+    ASSERT_EQ(frames.size(), 2u);
+    ASSERT_TRUE(frames[0].color.has_value() && frames[1].color.has_value());
+    const std::array<std::uint8_t, 3> blue{0, 0, 255}, green{0, 255, 0};
+    EXPECT_EQ((*frames[0].color)(3, 2), blue);
+    EXPECT_EQ((*frames[1].color)(3, 2), green);
+  }
+  // The second depth image's nearest colour now 30 ms away: no colour for the sequence.
+  fs::remove(dir / "rgb" / "1305031102.202330.png");
+  ASSERT_TRUE(cv::imwrite((dir / "rgb" / "1305031102.224330.png").string(),
+                          cv::Mat(6, 8, CV_8UC3, cv::Scalar(0, 255, 0))));
+  auto src = make_depth_image_source(dir, with_k(500, 500, 4, 3));
+  src->open();
+  const auto frames = read_all(*src);
+  ASSERT_EQ(frames.size(), 2u);
+  EXPECT_FALSE(frames[0].color.has_value());
   fs::remove_all(dir);
 }
 
