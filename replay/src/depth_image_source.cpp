@@ -123,51 +123,12 @@ Raw16 read_pgm16(const fs::path& file) {
   return r;
 }
 
-//! Width and height from the first IFD of a TIFF (tags 256 and 257), checked before OpenCV
-//! decodes, so that a lying header cannot make it allocate a huge image. Returns nothing when
-//! the structure is not understood (OpenCV then reports the problem).
-std::optional<std::pair<std::uint64_t, std::uint64_t>> tiff_size(
-    const std::vector<unsigned char>& b) {
-  if (b.size() < 8) return std::nullopt;
-  bool le;
-  if (b[0] == 'I' && b[1] == 'I')
-    le = true;
-  else if (b[0] == 'M' && b[1] == 'M')
-    le = false;
-  else
-    return std::nullopt;
-  auto u16 = [&](std::size_t o) -> std::uint32_t {
-    return le ? (b[o] | (b[o + 1] << 8)) : ((b[o] << 8) | b[o + 1]);
-  };
-  auto u32 = [&](std::size_t o) -> std::uint32_t {
-    return le ? (std::uint32_t{b[o]} | (std::uint32_t{b[o + 1]} << 8) |
-                 (std::uint32_t{b[o + 2]} << 16) | (std::uint32_t{b[o + 3]} << 24))
-              : ((std::uint32_t{b[o]} << 24) | (std::uint32_t{b[o + 1]} << 16) |
-                 (std::uint32_t{b[o + 2]} << 8) | std::uint32_t{b[o + 3]});
-  };
-  if (u16(2) != 42) return std::nullopt;  // classic TIFF only (BigTIFF: left to OpenCV)
-  const std::uint64_t ifd = u32(4);
-  if (ifd + 2 > b.size()) return std::nullopt;
-  const std::uint32_t n = u16(ifd);
-  if (ifd + 2 + std::uint64_t{n} * 12 > b.size()) return std::nullopt;
-  std::uint64_t w = 0, h = 0;
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const std::size_t e = ifd + 2 + k * 12;
-    const std::uint32_t tag = u16(e), type = u16(e + 2);
-    if (tag != 256 && tag != 257) continue;
-    const std::uint64_t v = type == 3 ? u16(e + 8) : type == 4 ? u32(e + 8) : 0;
-    (tag == 256 ? w : h) = v;
-  }
-  if (w == 0 || h == 0) return std::nullopt;
-  return std::make_pair(w, h);
-}
-
 Raw16 read_tiff16(const fs::path& file) {
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = detail::read_file_bytes(file, kMaxImageBytes);
   // The size the header declares is checked against the file before OpenCV allocates: the
   // pixels (16 bits each) cannot be compressed better than about 1032:1 (deflate; 1100 allowed).
-  const auto size = tiff_size(bytes);
+  const auto size = detail::tiff_size(bytes);
   if (!size)
     throw InputError(name, "TIFF header",
                      "no image width and height found (not a classic TIFF, or corrupt)");
@@ -396,7 +357,8 @@ std::optional<std::int64_t> timestamp_from_name(const std::string& stem) {
 //! otherwise the file whose name has "color", "colour" or "rgb" where the depth's has "depth"
 //! (Open3D's TUM_depth.png / TUM_color.png, NYU_depth.pgm / NYU_color.ppm).
 std::optional<fs::path> colour_beside(const fs::path& depth) {
-  static const char* const kExt[] = {".png", ".jpg", ".jpeg", ".ppm", ".PNG", ".JPG"};
+  static const char* const kExt[] = {".png",  ".jpg", ".jpeg", ".ppm",
+                                     ".tiff", ".tif", ".PNG",  ".JPG"};
   std::error_code ec;
   const fs::path dir = depth.parent_path();
   if (lower(dir.filename().string()) == "depth") {
@@ -434,7 +396,9 @@ std::vector<fs::path> colour_by_timestamp(const std::vector<fs::path>& depth_fil
     if (!fs::is_directory(cdir, ec)) continue;
     for (const auto& e : fs::directory_iterator(cdir, ec)) {
       const std::string ext = lower(e.path().extension().string());
-      if (!e.is_regular_file(ec) || (ext != ".png" && ext != ".jpg" && ext != ".jpeg")) continue;
+      if (!e.is_regular_file(ec) ||
+          (ext != ".png" && ext != ".jpg" && ext != ".jpeg" && ext != ".tiff" && ext != ".tif"))
+        continue;
       if (const auto t = timestamp_from_name(e.path().stem().string()))
         colour.emplace_back(*t, e.path());
     }

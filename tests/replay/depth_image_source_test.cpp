@@ -180,6 +180,23 @@ TEST(DepthImageSourceTest, PclGrabberTiffInMillimetres) {
   EXPECT_EQ(stats(frames[1]).valid, 271395u);
   // Timestamps from the names: 14:22:56.068683 - 14:22:55.814212 = 254471 us.
   EXPECT_EQ(frames[1].device_ts_us - frames[0].device_ts_us, 254471);
+  // The *_rgb.tiff beside each depth image is the frame's colour, pixel for pixel.
+  const cv::Mat bgr = cv::imread(
+      (test::shared_data_dir() / "pcl_grabber_sequence/tiff/frame_20121214T142256.068683_rgb.tiff")
+          .string(),
+      cv::IMREAD_COLOR);
+  ASSERT_FALSE(bgr.empty());
+  ASSERT_TRUE(frames[1].color.has_value());
+  ASSERT_EQ(frames[1].color->width, bgr.cols);
+  ASSERT_EQ(frames[1].color->height, bgr.rows);
+  std::size_t differ = 0;
+  for (int v = 0; v < bgr.rows; v += 7)
+    for (int u = 0; u < bgr.cols; u += 5) {
+      const cv::Vec3b p = bgr.at<cv::Vec3b>(v, u);
+      const std::array<std::uint8_t, 3> rgb{p[2], p[1], p[0]};
+      differ += (*frames[1].color)(u, v) != rgb;
+    }
+  EXPECT_EQ(differ, 0u);
 }
 
 TEST(DepthImageSourceTest, RedwoodUsesOpen3dIntrinsicsSidecar) {
