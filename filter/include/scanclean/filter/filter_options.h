@@ -97,6 +97,13 @@ struct FilterOptions {
   //! would otherwise carry onto it; without leaving them out, a point's own kernel, and in pairs
   //! and clumps of outliers each other's, pulled towards them by their weights, would vouch.
   double outlier_sigma = 4.0;
+  //! Own-plane refit of the kernels (kAuto only: it needs the noise estimate), [0, 100]; 0 =
+  //! off. A kernel whose plane leaves a residual spread sqrt(lambda_3) above refit_spread x the
+  //! cloud's noise sigma (two sheets of a thin part within h, a sharp crease, detail finer than
+  //! h) is refitted on the neighbours within 3 sigma of the plane through its own point, so that
+  //! it describes its own sheet or its own side of the crease; the projection's truncation then
+  //! keeps the other side's kernels from pulling points across.
+  double refit_spread = 0;
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
   bool use_sensor_normals = true;        //!< input normals (non-zero ones) replace PCA normals
