@@ -79,6 +79,7 @@ FilterOptions depth_frame_options() {
   FilterOptions o;
   o.scale_gamma = 0;
   o.displacement_sigma = 0;
+  o.refit_spread = 0;
   return o;
 }
 

@@ -10,6 +10,7 @@ bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3
   const double spread = std::sqrt(fit.lambda[0]);
   if (!(spread > prm.ratio * prm.sigma)) return false;
   constexpr int kRounds = 3;
+  constexpr double kMinOther = 0.1;
   const double band = 3.0 * prm.sigma;
   thread_local std::vector<FitSample> sel;
   Eigen::Vector3d n = fit.e.col(0);
@@ -26,6 +27,11 @@ bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3
     n = trial.e.col(0);
     anchor = trial.m;
   }
+  // A second structure must hold a real share of the neighbourhood: on a noisy plane whose
+  // spread is merely high by chance the band keeps almost everything (over 99 %).
+  double total = 0;
+  for (const FitSample& q : samples) total += q.t;
+  if (!(trial.weight < (1.0 - kMinOther) * total)) return false;
   if (!(std::sqrt(trial.lambda[0]) < spread)) return false;
   fit = trial;
   return true;

@@ -5,7 +5,9 @@
 //! crease, a plane cutting through a thin tube. Such a kernel is detected by its residual spread
 //! (sqrt(lambda_3) above refit_spread x the cloud's noise sigma) and refitted on the neighbours
 //! near the plane through its own centre point: only those within 3 noise sigma of the plane
-//! (the plane refitted on them and the selection repeated, three times). The kernel then
+//! (the plane refitted on them and the selection repeated, three times), provided the
+//! neighbours left out hold at least 10 % of the chi weight (a second structure, not a noisy
+//! plane whose spread is high by chance). The kernel then
 //! describes its own sheet or its own side of the crease, and the projection's truncation
 //! (Mahalanobis distance, slab) keeps the other side's kernels from pulling a point across.
 
