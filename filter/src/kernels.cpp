@@ -35,21 +35,25 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     const Eigen::Vector3f qi =
         by_slot ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
     KernelFit fit;
-    thread_local std::vector<FitSample> gathered;
-    const bool ok = fit_kernel(
-        d, i, h, o.k_min, prm.oriented, o.eigen_floor,
-        [&](auto&& g) {
-          auto cb = [&](std::uint32_t j, float) { g(j); };
-          if (by_slot)
-            idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
-          else
-            idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
-        },
-        fit, refit.active() ? &gathered : nullptr);
+    auto visit = [&](auto&& g) {
+      auto cb = [&](std::uint32_t j, float) { g(j); };
+      if (by_slot)
+        idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
+      else
+        idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
+    };
+    const bool ok = fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, fit);
     if (!ok) return;
-    if (refit.active() && refit_own_plane(gathered, d.p[i], h, refit, fit)) {
-      refitted[i / stride] = 1;
-      if (!(prm.oriented && d.has_v(i))) fit.n = fit.e.col(0).cast<float>().normalized();
+    if (wants_refit(fit, refit)) {
+      // Rare on smooth surfaces: only here are the neighbours gathered again, untrimmed (the
+      // same fit is solved again on the way).
+      thread_local std::vector<FitSample> gathered;
+      KernelFit again;
+      fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, again, &gathered);
+      if (refit_own_plane(gathered, d.p[i], h, refit, fit)) {
+        refitted[i / stride] = 1;
+        if (!(prm.oriented && d.has_v(i))) fit.n = fit.e.col(0).cast<float>().normalized();
+      }
     }
     nref[i] = fit.n;
     if (prm.support) (*prm.support)[i] = static_cast<float>(fit.weight - 1.0);

@@ -6,9 +6,8 @@ namespace scanclean::detail {
 
 bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
                      const PlaneRefit& prm, KernelFit& fit) {
-  if (!prm.active()) return false;
+  if (!wants_refit(fit, prm)) return false;
   const double spread = std::sqrt(fit.lambda[0]);
-  if (!(spread > prm.ratio * prm.sigma)) return false;
   constexpr int kRounds = 3;
   constexpr double kMinOther = 0.1;
   const double band = 3.0 * prm.sigma;
@@ -33,7 +32,9 @@ bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3
   for (const FitSample& q : samples) total += q.t;
   if (!(trial.weight < (1.0 - kMinOther) * total)) return false;
   if (!(std::sqrt(trial.lambda[0]) < spread)) return false;
+  const Eigen::Vector3f n_kept = fit.n;  // the caller's (a sensor normal stays)
   fit = trial;
+  fit.n = n_kept;
   return true;
 }
 

@@ -26,10 +26,15 @@ struct PlaneRefit {
   bool active() const { return sigma > 0 && ratio > 0; }
 };
 
+//! Whether `fit`'s residual spread asks for the refit (sqrt(lambda_3) > ratio x sigma).
+inline bool wants_refit(const KernelFit& fit, const PlaneRefit& prm) {
+  return prm.active() && fit.lambda[0] > prm.ratio * prm.ratio * prm.sigma * prm.sigma;
+}
+
 //! Refits `fit` (the robust weighted PCA of `samples`, offsets from `centre`, as fit_samples
 //! made it) on the samples near the plane through the centre point, when its residual spread
 //! asks for it (see above). Returns true if `fit` was replaced (its spread is then smaller).
-//! Leaves `fit.n` to the caller.
+//! Leaves `fit.n` as it was (the caller re-derives a PCA normal).
 bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
                      const PlaneRefit& prm, KernelFit& fit);
 

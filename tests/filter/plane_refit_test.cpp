@@ -59,7 +59,9 @@ TEST(PlaneRefitTest, TwoSheetsWithinHKeepTheCentrePointsSheet) {
   // The plain fit: a plane between the sheets, spread about half the gap.
   EXPECT_GT(fit.m.z(), 0.1);
   EXPECT_GT(std::sqrt(fit.lambda[0]), 0.1);
+  fit.n = Eigen::Vector3f(0, 0, -1);  // e.g. a sensor normal: the refit leaves it
   ASSERT_TRUE(refit_own_plane(nb, Eigen::Vector3d::Zero(), kH, refit_options(), fit));
+  EXPECT_EQ(fit.n, Eigen::Vector3f(0, 0, -1));
   EXPECT_NEAR(fit.m.z(), 0.0, 0.01);
   EXPECT_LT(std::sqrt(fit.lambda[0]), 1.2 * kSigma);
   EXPECT_GT(std::abs(fit.e.col(0).z()), 0.999);
