@@ -313,8 +313,8 @@ std::optional<fs::path> find_sidecar(const fs::path& images) {
   return std::nullopt;
 }
 
-//! Seconds since the epoch from a TUM name ("1305031102.160407") or a PCL grabber name
-//! ("frame_20121214T142255.814212_depth"), in microseconds.
+}  // namespace
+
 std::optional<std::int64_t> timestamp_from_name(const std::string& stem) {
   // TUM: the whole stem is a decimal number of seconds (plausible UNIX time).
   {
@@ -351,6 +351,8 @@ std::optional<std::int64_t> timestamp_from_name(const std::string& stem) {
   }
   return std::nullopt;
 }
+
+namespace {
 
 //! The colour image that belongs to a depth image, if there is one: in a depth/ folder, the
 //! file of the same stem in a sibling color/, colour/ or rgb/ folder (Redwood, slambook);
