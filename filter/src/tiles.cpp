@@ -508,26 +508,26 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       };
       return c(0, dx) | (c(1, dy) << 21) | (c(2, dz) << 42);
     };
+    // Each sample is listed in the 27 cells around its own: a point looks up its cell only.
     for (std::size_t k = 0; k < active.size(); ++k)
-      near[key(qf[active[k]], 0, 0, 0)].push_back(static_cast<std::uint32_t>(k));
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx)
+            near[key(qf[active[k]], dx, dy, dz)].push_back(static_cast<std::uint32_t>(k));
     stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
       for (const auto& p : c.positions) {
         if (!hist_done) ++hist[grid.flat(grid.cell_of(p))];
         if (!need_kth) continue;
         const Eigen::Vector3f pf = (p - origin).cast<float>();
-        for (int dz = -1; dz <= 1; ++dz)
-          for (int dy = -1; dy <= 1; ++dy)
-            for (int dx = -1; dx <= 1; ++dx) {
-              const auto it = near.find(key(pf, dx, dy, dz));
-              if (it == near.end()) continue;
-              for (std::uint32_t k : it->second) {
-                // The same float arithmetic as the neighbour index's distance test.
-                const Eigen::Vector3f& q = qf[active[k]];
-                const float ex = pf.x() - q.x(), ey = pf.y() - q.y(), ez = pf.z() - q.z();
-                const float dd = ex * ex + ey * ey + ez * ez;
-                if (dd < R * R) d2[k].push_back(dd);
-              }
-            }
+        const auto it = near.find(key(pf, 0, 0, 0));
+        if (it == near.end()) continue;
+        for (std::uint32_t k : it->second) {
+          // The same float arithmetic as the neighbour index's distance test.
+          const Eigen::Vector3f& q = qf[active[k]];
+          const float ex = pf.x() - q.x(), ey = pf.y() - q.y(), ez = pf.z() - q.z();
+          const float dd = ex * ex + ey * ey + ez * ez;
+          if (dd < R * R) d2[k].push_back(dd);
+        }
       }
     });
     // Sum the histograms and join the distance lists of every process.
@@ -587,24 +587,24 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         };
         return c(0, dx) | (c(1, dy) << 21) | (c(2, dz) << 42);
       };
-      for (std::size_t k : qs) near[key(qf[k], 0, 0, 0)].push_back(static_cast<std::uint32_t>(k));
+      for (std::size_t k : qs)
+        for (int dz = -1; dz <= 1; ++dz)
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx)
+              near[key(qf[k], dx, dy, dz)].push_back(static_cast<std::uint32_t>(k));
       Bytes mine;
       std::uint64_t count = 0;
       stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
         for (std::size_t i = 0; i < c.size(); ++i) {
           const Eigen::Vector3f pf = (c.positions[i] - origin).cast<float>();
+          const auto it = near.find(key(pf, 0, 0, 0));
+          if (it == near.end()) continue;
           bool hit = false;
-          for (int dz = -1; dz <= 1 && !hit; ++dz)
-            for (int dy = -1; dy <= 1 && !hit; ++dy)
-              for (int dx = -1; dx <= 1 && !hit; ++dx) {
-                const auto it = near.find(key(pf, dx, dy, dz));
-                if (it == near.end()) continue;
-                for (std::uint32_t s : it->second)
-                  if ((pf - qf[s]).squaredNorm() < Rf * Rf * 1.0001f) {
-                    hit = true;
-                    break;
-                  }
-              }
+          for (std::uint32_t s : it->second)
+            if ((pf - qf[s]).squaredNorm() < Rf * Rf * 1.0001f) {
+              hit = true;
+              break;
+            }
           if (!hit) continue;
           ++count;
           mine.put(c.positions[i]);
