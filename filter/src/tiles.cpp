@@ -359,7 +359,7 @@ void validate(const TiledOptions& t) {
   if (t.chunk_records == 0) throw OptionError("tiled filter: chunk_records must be > 0");
 }
 
-// Measured on the scaling benchmark's scenes (bench/README.md, "Scaling"): the filter's own peak
+// Measured on the scaling benchmark's scenes (docs/SCALING.md): the filter's own peak
 // plus the tile's input and result copies, about 330 bytes per point, and 192 MiB for the
 // histogram, the read buffers and the program.
 std::uint64_t tile_point_limit(std::size_t budget) {

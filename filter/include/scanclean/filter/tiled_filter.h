@@ -81,7 +81,7 @@ struct TiledOptions {
 void validate(const TiledOptions& options);
 
 //! Points a tile may hold (halo included) under the budget: what the filter needs per point,
-//! measured (bench/README.md, "Scaling").
+//! measured (docs/SCALING.md).
 std::uint64_t tile_point_limit(std::size_t memory_budget);
 
 //! Bytes the in-memory filter is expected to need for n points (for the decision to tile).
