@@ -70,9 +70,9 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
   if (!c.tiled && in_memory_bytes(records) <= t.memory_budget) return -1;
   if (point_cloud_format(c.output) != "ply" ||
       (!c.outliers.empty() && point_cloud_format(c.outliers) != "ply") || c.ascii)
-    throw OptionError("filter: " + with_thousands(records) +
-                      " points exceed the memory budget, and the tiled (out-of-core) run writes "
-                      "binary PLY only: use a .ply output (or raise --memory-budget)");
+    throw OptionError("filter: the tiled (out-of-core) run of " + with_thousands(records) +
+                      " points writes binary PLY only: use a .ply output (or filter in memory: "
+                      "--memory-budget off, or a larger budget)");
   if (!c.mesh->path.empty())
     throw OptionError(
         "filter: --mesh needs the whole cloud in memory; it cannot follow a tiled "
@@ -105,7 +105,9 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
     sum.add("noise sigma (estimate)", g.noise_sigma * 1000.0, 3, "mm");
   sum.add("merge eps", g.merge_eps * 1000.0, 3, "mm");
   sum.add("kernel stride", std::to_string(g.kernel_stride));
-  sum.add("tiles", std::to_string(s.tiles) + " (halo " + std::to_string(g.halo * 1000.0) + " mm, " +
+  char halo[48];
+  std::snprintf(halo, sizeof halo, "%.1f mm", g.halo * 1000.0);
+  sum.add("tiles", std::to_string(s.tiles) + " (halo " + halo + ", " +
                        with_thousands(s.halo_points) + " halo points, largest tile " +
                        with_thousands(s.tile_points_max) + ")");
   char phases[160];
