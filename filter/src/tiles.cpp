@@ -391,6 +391,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   std::vector<std::uint64_t> sample_rec(M);
   for (std::uint64_t k = 0; k < M; ++k) sample_rec[k] = k * src.records / M;
   Columns cols;
+  std::vector<Eigen::Vector3d> sample_xyz;  // the samples' positions, in record order
   {
     Eigen::AlignedBox3d box;
     std::uint64_t n = 0;
@@ -422,6 +423,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     mine.s.append(reinterpret_cast<const char*>(has), 4);
     mine.put_vec(std::vector<char>(samples.s.begin(), samples.s.end()));
     std::vector<std::uint64_t> valid_samples;
+    std::vector<Eigen::Vector3d> sample_pos;
     for (const std::string& m : allgather(comm, mine.s)) {
       Reader r{m};
       const auto lo = r.get<Eigen::Vector3d>(), hi = r.get<Eigen::Vector3d>();
@@ -440,12 +442,13 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       Reader s{ss};
       while (!s.done()) {
         valid_samples.push_back(s.get<std::uint64_t>());
-        s.get<Eigen::Vector3d>();
+        sample_pos.push_back(s.get<Eigen::Vector3d>());
         s.get<Eigen::Vector3f>();
         s.get<float>();
       }
     }
     sample_rec = valid_samples;  // in record order (ranks read ascending ranges)
+    sample_xyz = std::move(sample_pos);
   }
   st.points_in = gl.points;
   if (gl.points == 0) return st;
@@ -459,15 +462,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
 
   // Pass 2: the histogram, and the K-th neighbour distances of the samples (kAuto, kAdaptive).
   std::vector<Eigen::Vector3f> qf;  // the samples, float, relative to the origin
-  {
-    // The samples' positions: read back by record (a handful of small reads).
-    for (std::uint64_t rec : sample_rec) {
-      PointCloud c;
-      std::vector<std::uint64_t> r;
-      src.read(rec, 1, c, r);
-      if (!c.empty()) qf.push_back((c.positions[0] - origin).cast<float>());
-    }
-  }
+  for (const Eigen::Vector3d& p : sample_xyz) qf.push_back((p - origin).cast<float>());
   std::vector<double> kth(qf.size(), 0.0);
   double reach = 0;
   if (o.scale != ScaleMode::kFixed && !qf.empty()) {
