@@ -139,7 +139,8 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
                                {"iterations", AttributeType::kUInt8},
                                {"flags", AttributeType::kUInt8},
                                {"merge_count", AttributeType::kUInt32},
-                               {"source_index", AttributeType::kUInt32}};
+                               {"source_index", AttributeType::kUInt32},
+                               {"displacement", AttributeType::kFloat32}};
     outlier_layout.attributes = {{"flags", AttributeType::kUInt8},
                                  {"source_index", AttributeType::kUInt32}};
     if (rank0) {
