@@ -135,12 +135,10 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
     cloud_layout.confidences = outlier_layout.confidences = s->has_confidences();
     cloud_layout.intensities = outlier_layout.intensities = s->has_intensities();
     cloud_layout.colors = outlier_layout.colors = s->has_colors();
-    cloud_layout.attributes = {{"likelihood", AttributeType::kFloat32},
-                               {"iterations", AttributeType::kUInt8},
-                               {"flags", AttributeType::kUInt8},
-                               {"merge_count", AttributeType::kUInt32},
-                               {"source_index", AttributeType::kUInt32},
-                               {"displacement", AttributeType::kFloat32}};
+    cloud_layout.attributes = {
+        {"likelihood", AttributeType::kFloat32},  {"iterations", AttributeType::kUInt8},
+        {"flags", AttributeType::kUInt8},         {"merge_count", AttributeType::kUInt32},
+        {"source_index", AttributeType::kUInt32}, {"displacement", AttributeType::kFloat32}};
     outlier_layout.attributes = {{"flags", AttributeType::kUInt8},
                                  {"source_index", AttributeType::kUInt32}};
     if (rank0) {
