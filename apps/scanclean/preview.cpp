@@ -1,11 +1,8 @@
 #include "scanclean/preview.h"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <array>
 #include <cctype>
-#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -18,6 +15,7 @@
 
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
+#include "scanclean/output_checks.h"
 #include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
@@ -301,16 +299,9 @@ void check_preview_path(const std::string& command, const std::string& path) {
   const fs::path p(path);
   const std::string who = command + ": --preview \"" + path + "\"";
   if (lower(p.extension().string()) != ".png") throw OptionError(who + ": must end in .png");
-  std::error_code ec;
-  if (fs::is_directory(p, ec)) throw OptionError(who + ": is a folder; expected a file name");
-  const fs::path folder = p.parent_path().empty() ? fs::path(".") : p.parent_path();
-  if (!fs::is_directory(folder, ec))
-    throw IoError(who + ": the folder \"" + folder.string() +
-                  "\" does not exist (create it first)");
-  if (::access(folder.c_str(), W_OK | X_OK) != 0)
-    throw IoError(who + ": cannot write in the folder \"" + folder.string() +
-                  "\": " + std::strerror(errno));
-  note_report_output({"--preview", p});
+  // The folder exists and is writable, the path is no folder (output_checks.h; it also notes
+  // the path for --report).
+  check_output_files(command, {}, {{"--preview", p}}, false);
 }
 
 PreviewFacts write_preview(const fs::path& png, const PointCloud& before, const PointCloud& after,
