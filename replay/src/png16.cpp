@@ -186,7 +186,10 @@ namespace {
 // the file's real size before the decoder allocates anything: a Netpbm raster must be in the
 // file; a compressed one cannot expand more than deflate's / JPEG's best ratio (about 1032:1;
 // 1100 allowed, also for TIFF's PackBits/LZW/deflate). Any other format is refused (the decoder
-// would trust its header).
+// would trust its header). The signatures are checked as strictly as OpenCV's decoders check
+// them (JPEG FF D8 FF, Netpbm magic + whitespace, TIFF II*0 / MM0*): OpenCV picks the first
+// decoder whose signature matches, and one that did not would let another decoder (such as
+// GDCM's, which finds "DICM" at byte 128 and aborts on a malformed file) read the bytes.
 void check_colour_image_size(const std::vector<unsigned char>& b, const std::string& name) {
   const std::uint64_t size = b.size();
   std::uint64_t w = 0, h = 0, raster = 0;  // raster: bytes the pixels need at least
@@ -198,7 +201,7 @@ void check_colour_image_size(const std::vector<unsigned char>& b, const std::str
     w = ph.width;
     h = ph.height;
     raster = w * h * (ph.color_type == 0 || ph.color_type == 3 ? 1 : 3);
-  } else if (size >= 4 && b[0] == 0xFF && b[1] == 0xD8) {
+  } else if (size >= 4 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF) {
     kind = "JPEG";
     std::size_t i = 2;
     while (i + 9 < size) {
@@ -220,8 +223,8 @@ void check_colour_image_size(const std::vector<unsigned char>& b, const std::str
     if (w == 0 || h == 0)
       throw InputError(name, "", "JPEG without a frame header (SOF) giving its size");
     raster = w * h;
-  } else if (size >= 2 && b[0] == 'P' &&
-             (b[1] == '2' || b[1] == '3' || b[1] == '5' || b[1] == '6')) {
+  } else if (size >= 3 && b[0] == 'P' &&
+             (b[1] == '2' || b[1] == '3' || b[1] == '5' || b[1] == '6') && std::isspace(b[2])) {
     kind = "PPM/PGM";
     compressed = false;
     // "P6 <w> <h> <maxval>" with whitespace and # comments; then one whitespace byte.
