@@ -9,69 +9,15 @@
 #include <stdexcept>
 
 #include "header_comment.h"
+#include "ply_encode.h"
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
 
 namespace scanclean {
 namespace {
 
-template <class T>
-void put(std::string& buf, T v) {
-  unsigned char b[sizeof(T)];
-  std::memcpy(b, &v, sizeof(T));
-  if constexpr (std::endian::native == std::endian::big) std::reverse(b, b + sizeof(T));
-  buf.append(reinterpret_cast<const char*>(b), sizeof(T));
-}
-
-template <class I>
-I clamp_int(double v) {
-  if (!(v == v)) return 0;
-  const double lo = static_cast<double>(std::numeric_limits<I>::min());
-  const double hi = static_cast<double>(std::numeric_limits<I>::max());
-  return static_cast<I>(std::llround(std::clamp(v, lo, hi)));
-}
-
-const char* type_name(AttributeType t) {
-  switch (t) {
-    case AttributeType::kUInt8:
-      return "uchar";
-    case AttributeType::kInt32:
-      return "int";
-    case AttributeType::kUInt32:
-      return "uint";
-    case AttributeType::kFloat32:
-      return "float";
-    case AttributeType::kFloat64:
-      return "double";
-  }
-  return "double";
-}
-
-void put_attribute(std::string& buf, AttributeType t, double v) {
-  switch (t) {
-    case AttributeType::kUInt8:
-      put(buf, clamp_int<std::uint8_t>(v));
-      break;
-    case AttributeType::kInt32:
-      put(buf, clamp_int<std::int32_t>(v));
-      break;
-    case AttributeType::kUInt32:
-      put(buf, clamp_int<std::uint32_t>(v));
-      break;
-    case AttributeType::kFloat32:
-      put(buf, static_cast<float>(v));
-      break;
-    case AttributeType::kFloat64:
-      put(buf, v);
-      break;
-  }
-}
-
-std::string sanitize(std::string name) {
-  for (char& c : name)
-    if (c == ' ' || c == '\t' || c == '\n' || c == '\r') c = '_';
-  return name.empty() ? std::string("unnamed") : name;
-}
+using io_detail::put_le;
+using io_detail::put_ply_binary;
 
 // Room for the final vertex count in the provisional header (20 digits hold any 64-bit count).
 constexpr std::size_t kCountWidth = 20;
@@ -103,16 +49,16 @@ std::string encode_ply_vertices(const PointCloud& cloud, const PlyLayout& l) {
   for (std::size_t i = 0; i < n; ++i) {
     for (int k = 0; k < 3; ++k) {
       if (l.double_positions)
-        put(buf, cloud.positions[i][k]);
+        put_le(buf, cloud.positions[i][k]);
       else
-        put(buf, static_cast<float>(cloud.positions[i][k]));
+        put_le(buf, static_cast<float>(cloud.positions[i][k]));
     }
     if (l.normals)
-      for (int k = 0; k < 3; ++k) put(buf, cloud.normals[i][k]);
-    if (l.confidences) put(buf, cloud.confidences[i]);
-    if (l.intensities) put(buf, cloud.intensities[i]);
+      for (int k = 0; k < 3; ++k) put_le(buf, cloud.normals[i][k]);
+    if (l.confidences) put_le(buf, cloud.confidences[i]);
+    if (l.intensities) put_le(buf, cloud.intensities[i]);
     if (l.colors) buf.append(reinterpret_cast<const char*>(cloud.colors[i].data()), 4);
-    for (const auto& a : cloud.attributes) put_attribute(buf, a.type, a.values[i]);
+    for (const auto& a : cloud.attributes) put_ply_binary(buf, a.type, a.values[i]);
   }
   return buf;
 }
@@ -147,7 +93,8 @@ std::string PlyStreamWriter::header(std::uint64_t count) const {
     for (const char* a : {"red", "green", "blue", "alpha"})
       h += std::string("property uchar ") + a + "\n";
   for (const auto& [name, type] : layout_.attributes)
-    h += std::string("property ") + type_name(type) + " " + sanitize(name) + "\n";
+    h += std::string("property ") + io_detail::ply_type_name(type) + " " +
+         io_detail::sanitize_ply_name(name) + "\n";
   h += "end_header\n";
   return h;
 }
