@@ -16,6 +16,7 @@ std::string FilterSettings::describe() const {
   s << "defaults";
   if (adaptive) s << ", scale=adaptive k=" << k_adaptive;
   if (kernel_stride > 0) s << ", kernel_stride=" << kernel_stride;
+  if (refit_spread >= 0) s << ", refit_spread=" << refit_spread;
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
 }
@@ -42,6 +43,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   }
   options.kernel_stride = settings.kernel_stride;
   options.threads = settings.threads;
+  if (settings.refit_spread >= 0) options.refit_spread = settings.refit_spread;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r = robust_filter(input, options);
   const auto t1 = std::chrono::steady_clock::now();
@@ -69,6 +71,8 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   run.h = s.h;
   run.noise_sigma = s.noise_sigma;
   run.mean_iterations = s.mean_iterations;
+  run.kernels = s.kernels;
+  run.kernels_refitted = s.kernels_refitted;
   run.p95_iterations = s.p95_iterations;
   run.unsupported = s.unsupported;
   run.off_surface = s.off_surface;

@@ -113,6 +113,13 @@ int run(int argc, char** argv) {
   app.add_flag("--filter-only", filter_only,
                "quality suite: run robust_filter alone, without the peers (for quick experiments; "
                "no target check)");
+  std::vector<std::string> shape_names;
+  app.add_option("--shapes", shape_names,
+                 "quality suite: only these shapes (sphere torus rounded_box bunny; the known "
+                 "limits: thin_plate sharp_box cad_block two_scale)");
+  double refit_spread = -1;
+  app.add_option("--refit-spread", refit_spread,
+                 "quality and real suites: robust_filter's refit_spread (default: the library's)");
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
@@ -138,6 +145,8 @@ int run(int argc, char** argv) {
   ctx.sizes = sizes;
   ctx.sigmas = sigmas;
   ctx.filter_only = filter_only;
+  ctx.shape_names = shape_names;
+  ctx.refit_spread = refit_spread;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

@@ -184,6 +184,23 @@ Metrics evaluate(const GroundTruth& gt, const std::vector<Eigen::Vector3d>& outp
   std::size_t covered = 0;
   for (double d2 : dense2o) covered += d2 <= tol2 ? 1 : 0;
   m.coverage = static_cast<double>(covered) / static_cast<double>(dense2o.size());
+  if (gt.edge_band() > 0 && gt.shape().has_creases()) {
+    std::vector<std::uint8_t> in_band(output.size());
+    parallel_each(output.size(), [&](std::size_t i) {
+      in_band[i] = gt.shape().crease_distance(output[i]) < gt.edge_band() ? 1 : 0;
+    });
+    double sum = 0, sq = 0;
+    for (std::size_t i = 0; i < output.size(); ++i) {
+      if (!in_band[i]) continue;
+      ++m.edge_n;
+      sum += o2surf[i];
+      sq += o2surf_sq[i];
+    }
+    if (m.edge_n > 0) {
+      m.edge_mean = sum / static_cast<double>(m.edge_n);
+      m.edge_rms = std::sqrt(sq / static_cast<double>(m.edge_n));
+    }
+  }
   return m;
 }
 

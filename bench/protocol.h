@@ -53,6 +53,10 @@ class GroundTruth {
   //! Coverage tolerance: the 99th percentile of the distance from the dense sample to the clean
   //! sample, so the clean, noise-free input itself has 99 % coverage.
   double coverage_tolerance() const { return coverage_tol_; }
+  //! Edge band of the edge-band metric (shapes with creases): output points whose nearest
+  //! surface point lies within this distance of a crease; 0 = no edge metric.
+  double edge_band() const { return edge_band_; }
+  void set_edge_band(double band) { edge_band_ = band; }
 
  private:
   const Shape& shape_;
@@ -60,6 +64,7 @@ class GroundTruth {
   std::vector<Eigen::Vector3d> dense_;
   std::unique_ptr<KdTree> clean_tree_;
   double coverage_tol_ = 0;
+  double edge_band_ = 0;
 };
 
 struct Metrics {
@@ -70,6 +75,12 @@ struct Metrics {
   double p95_dist = 0;   //!< 95th percentile of the same
   double rms_dist = 0;   //!< RMS of the same, over ALL output points
   double coverage = 0;   //!< share of the dense sample within coverage_tolerance of the output
+  //! Edge band (GroundTruth::edge_band() > 0 and a shape with creases): RMS and mean distance to
+  //! the surface of the output points whose nearest surface point is within the band of a
+  //! crease, and their count.
+  double edge_rms = std::nan("");
+  double edge_mean = std::nan("");
+  std::size_t edge_n = 0;
   // Outlier classification (only when labels are given).
   bool classified = false;
   std::size_t removed = 0;

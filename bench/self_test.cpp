@@ -53,6 +53,33 @@ int self_test_main(std::uint64_t seed) {
     c.check(std::abs(outer - expect) < 0.005,
             "torus: share on the outer half is 1/2 + r/(pi R) = 0.636", outer);
   }
+  // 1b. The shapes at the known limits: samples on the surface, normalised, exact distances at
+  // known points (the box's centre: its smallest half extent; a corner: on a crease).
+  {
+    Rng rng(derive_seed(seed, 11));
+    for (const auto& s : limit_shapes()) {
+      const auto pts = s->sample(20000, rng);
+      double worst = 0, far = 0;
+      for (const auto& p : pts) {
+        worst = std::max(worst, s->distance(p));
+        far = std::max(far, p.norm());
+      }
+      c.check(worst < 1e-9, s->name() + ": samples on the surface, max distance", worst);
+      c.check(far <= 1.0 + 1e-9 && far > 0.9, s->name() + ": samples within the unit sphere", far);
+    }
+    auto box = make_sharp_box();
+    const double half_z = box->box().max().z();  // the smallest half extent
+    c.check(std::abs(box->distance(Eigen::Vector3d::Zero()) - half_z) < 1e-12,
+            "sharp_box: distance of the centre is the smallest half extent",
+            box->distance({0, 0, 0}));
+    const Eigen::Vector3d corner = box->box().max();
+    c.check(box->crease_distance(corner) < 1e-12 && box->crease_distance({0, 0, half_z}) > 0.1,
+            "sharp_box: a corner lies on a crease, a face centre does not",
+            box->crease_distance({0, 0, half_z}));
+    auto two = make_two_scale();
+    const double big = two->distance(Eigen::Vector3d::Zero());  // the big sphere's radius
+    c.check(std::abs(big - 0.62 / 0.88) < 1e-12, "two_scale: big sphere radius 0.62 / 0.88", big);
+  }
   // 2. Metrics against oracles.
   {
     auto sphere = make_sphere();

@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -29,6 +30,12 @@ class Shape {
   virtual Eigen::AlignedBox3d box() const = 0;
   //! Surface area.
   virtual double area() const = 0;
+  //! Shapes with sharp creases: the distance from the point of the surface nearest to p to the
+  //! nearest crease (the edge-band metric's test). Others: +infinity.
+  virtual double crease_distance(const Eigen::Vector3d& /*p*/) const {
+    return std::numeric_limits<double>::infinity();
+  }
+  virtual bool has_creases() const { return false; }
 };
 
 //! Unit sphere.
@@ -38,6 +45,22 @@ std::unique_ptr<Shape> make_torus();
 //! Rounded box: the Minkowski sum of a box with half extents proportional to (0.5, 0.35, 0.2)
 //! and a ball of radius proportional to 0.15, scaled so that its corners lie on the unit sphere.
 std::unique_ptr<Shape> make_rounded_box();
+//! The shapes at the filter's known limits (README, "Known limits"), exact distances:
+//! thin_plate: a closed wedge plate, 1.7 x 1 (before normalisation), whose two large faces are
+//! 0.01 apart at one end and 0.32 at the other (linearly in x): 0.1 h to 3 h at the protocol's h.
+std::unique_ptr<Shape> make_thin_plate();
+//! sharp_box: the rounded box's box, half extents proportional to (0.5, 0.35, 0.2), without
+//! rounding (twelve 90-degree creases), corners on the unit sphere.
+std::unique_ptr<Shape> make_sharp_box();
+//! cad_block: a fandisk-like CAD part, a house-shaped prism (pentagonal section: walls, two roof
+//! faces) with creases of 90, 117 and 127 degrees.
+std::unique_ptr<Shape> make_cad_block();
+//! two_scale: one sphere of radius 0.70 with fine detail around it, 0.11 away: two small tori
+//! (tube radius 0.068) and four small spheres (radius 0.091), all disjoint; bounding radius 1.
+std::unique_ptr<Shape> make_two_scale();
+//! The four shapes above, in that order.
+std::vector<std::unique_ptr<Shape>> limit_shapes();
+
 //! A triangle mesh read with io's read_triangle_mesh and normalised (vertices' bounding-box centre
 //! to the origin, farthest vertex at radius 1); distances by eval::MeshDistance.
 //! \throw UnavailableError if the benchmark was built without the io/eval modules;

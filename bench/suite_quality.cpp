@@ -26,11 +26,13 @@ struct Method {
   std::function<Points(const Points&)> run;
 };
 
-std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool with_wlop) {
+std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool with_wlop,
+                                      double refit_spread) {
   std::vector<Method> m;
   if (filter_available()) {
     FilterSettings fs;
     fs.threads = threads;
+    fs.refit_spread = refit_spread;
     m.push_back({"scanclean robust_filter", fs.describe(),
                  [fs](const Points& in) { return run_robust_filter(in, fs).cloud.positions; }});
   }
@@ -74,8 +76,28 @@ struct Accum {
 
 }  // namespace
 
-void run_quality_suite(Context& ctx) {
-  auto shapes = protocol_shapes(ctx);
+namespace {
+
+// The positions (in `shapes`) of the shapes named in ctx.shape_names (all when it is empty): a
+// shape's seeds follow its position in the full list, so a subset draws the same instances.
+std::vector<std::size_t> named(const Context& ctx,
+                               const std::vector<std::unique_ptr<Shape>>& shapes) {
+  std::vector<std::size_t> keep;
+  for (std::size_t i = 0; i < shapes.size(); ++i)
+    if (ctx.shape_names.empty() || std::find(ctx.shape_names.begin(), ctx.shape_names.end(),
+                                             shapes[i]->name()) != ctx.shape_names.end())
+      keep.push_back(i);
+  return keep;
+}
+
+// The protocol on one set of shapes. `limits`: the shapes at the filter's known limits (own
+// tables, edge-band columns, a per-shape target check).
+void run_shape_set(Context& ctx, std::vector<std::unique_ptr<Shape>> all, bool limits) {
+  const std::vector<std::size_t> seed_ids = named(ctx, all);
+  std::vector<std::unique_ptr<Shape>> shapes;
+  for (std::size_t i : seed_ids) shapes.push_back(std::move(all[i]));
+  if (shapes.empty()) return;
+  const std::string set_note = limits ? " - shapes at the known limits" : "";
   std::vector<std::size_t> sizes =
       ctx.quick ? std::vector<std::size_t>{10000} : std::vector<std::size_t>{10000, 50000};
   std::vector<double> sigmas =
@@ -95,11 +117,17 @@ void run_quality_suite(Context& ctx) {
 
   Table detail;
   detail.title =
-      "Quality per shape (no outliers; CD and P2M x 1e4, distances in unit-sphere units)";
+      "Quality per shape (no outliers; CD and P2M x 1e4, distances in unit-sphere "
+      "units)" +
+      set_note;
   detail.header = {"shape", "N",      "sigma", "method",   "CD",
                    "P2M",   "mean d", "p95 d", "coverage", "time s"};
+  if (limits) {
+    detail.header.push_back("edge RMS d");
+    detail.header.push_back("edge points");
+  }
   Table settings;
-  settings.title = "Peer settings per noise level and size";
+  settings.title = "Peer settings per noise level and size" + set_note;
   settings.header = {"N", "sigma", "method", "settings"};
   // key: (n, sigma index, method order) -> accumulated over shapes
   std::map<std::tuple<std::size_t, int, int>, Accum> acc;
@@ -111,7 +139,7 @@ void run_quality_suite(Context& ctx) {
       const double sigma = sigmas[si];
       const PeerSettings ps = peer_settings(sigma, n);
       const bool with_wlop = !ctx.quick && (ctx.wlop_max_n == 0 || n <= ctx.wlop_max_n);
-      auto methods = smoothing_methods(ps, ctx.threads, with_wlop);
+      auto methods = smoothing_methods(ps, ctx.threads, with_wlop, ctx.refit_spread);
       if (ctx.filter_only)
         methods.erase(
             std::remove_if(methods.begin(), methods.end(),
@@ -124,14 +152,21 @@ void run_quality_suite(Context& ctx) {
         InstanceSpec spec;
         spec.n = n;
         spec.sigma = sigma;
-        spec.seed = derive_seed(ctx.seed, 100 + shi, n, seed_index[si]);
+        const std::size_t sid = seed_ids[shi];
+        spec.seed = derive_seed(ctx.seed, 100 + sid, n, seed_index[si]);
+        if (limits) spec.seed = derive_seed(ctx.seed, 500 + sid, n, seed_index[si]);
         Instance inst = make_instance(shape, spec);
         GroundTruth gt(shape, inst.clean, kDense,
-                       derive_seed(ctx.seed, 200 + shi, n, seed_index[si]));
+                       derive_seed(ctx.seed, 200 + sid, n, seed_index[si]));
+        gt.set_edge_band(2 * sigma);
         auto add_row = [&](int order, const std::string& name, const Metrics& mt, double secs) {
           detail.rows.push_back({shape.name(), fmt_count(n), fmt(sigma, 2), name, fmt(mt.cd, 2),
                                  fmt(mt.p2m, 2), fmt(mt.mean_dist, 4), fmt(mt.p95_dist, 4),
                                  fmt_pct(mt.coverage, 1), fmt(secs, 2)});
+          if (limits) {
+            detail.rows.back().push_back(mt.edge_n ? fmt(mt.edge_rms, 4) : "-");
+            detail.rows.back().push_back(mt.edge_n ? fmt_count(mt.edge_n) : "-");
+          }
           Accum& a = acc[{n, static_cast<int>(si), order}];
           a.cd += mt.cd;
           a.p2m += mt.p2m;
@@ -157,7 +192,8 @@ void run_quality_suite(Context& ctx) {
   }
 
   Table avg;
-  avg.title = "Quality averaged over shapes (the protocol's headline numbers)";
+  avg.title = limits ? "Quality averaged over the shapes at the known limits"
+                     : "Quality averaged over shapes (the protocol's headline numbers)";
   avg.header = {"N",      "sigma", "method",   "CD x1e4",     "P2M x1e4",
                 "mean d", "p95 d", "coverage", "time s (sum)"};
   for (const auto& [key, a] : acc) {
@@ -186,8 +222,51 @@ void run_quality_suite(Context& ctx) {
       "percentile of the dense-sample -> clean-sample distance for that shape and N (so the "
       "clean input scores 99 %).");
 
-  // Targets: robust_filter vs jet and bilateral, per (N, sigma) on the averages and per shape.
-  if (filter_available() && !ctx.filter_only) {
+  if (limits && filter_available() && !ctx.filter_only) {
+    Table tgt;
+    tgt.title =
+        "Target check per shape at the known limits: robust_filter vs the best peer (lower is "
+        "better)";
+    tgt.header = {"shape",         "N",
+                  "sigma",         "ours CD",
+                  "best peer CD",  "best peer",
+                  "ours edge RMS", "best peer edge RMS",
+                  "ours P2M",      "best peer P2M"};
+    int ours = -1;
+    for (const auto& [o, nm] : method_names)
+      if (nm == "scanclean robust_filter") ours = o;
+    for (std::size_t n : sizes)
+      for (std::size_t si = 0; si < sigmas.size(); ++si)
+        for (const auto& sh : shapes) {
+          const int s = static_cast<int>(si);
+          const auto it = per_shape.find({n, s, ours, sh->name()});
+          if (it == per_shape.end()) continue;
+          const Metrics& mo = it->second;
+          double best_cd = 1e300, best_p2m = 1e300, best_edge = 1e300;
+          std::string best_name = "-";
+          for (const auto& [o, nm] : method_names) {
+            if (o == ours || o == 0) continue;  // 0: the noisy input
+            const auto jt = per_shape.find({n, s, o, sh->name()});
+            if (jt == per_shape.end()) continue;
+            if (jt->second.cd < best_cd) {
+              best_cd = jt->second.cd;
+              best_name = nm;
+            }
+            best_p2m = std::min(best_p2m, jt->second.p2m);
+            if (jt->second.edge_n) best_edge = std::min(best_edge, jt->second.edge_rms);
+          }
+          tgt.rows.push_back({sh->name(), fmt_count(n), fmt(sigmas[si], 2), fmt(mo.cd, 2),
+                              fmt(best_cd, 2), best_name, mo.edge_n ? fmt(mo.edge_rms, 4) : "-",
+                              best_edge < 1e300 ? fmt(best_edge, 4) : "-", fmt(mo.p2m, 2),
+                              fmt(best_p2m, 2)});
+        }
+    tgt.notes.push_back(
+        "Edge RMS: RMS distance to the surface of the output points whose nearest surface point "
+        "lies within 2 sigma of a crease (sharp_box, cad_block; thin_plate: its rim).");
+    ctx.add(std::move(avg));
+    ctx.add(std::move(tgt));
+  } else if (filter_available() && !ctx.filter_only) {
+    // Targets: robust_filter vs jet and bilateral, per (N, sigma) on the averages and per shape.
     Table tgt;
     tgt.title = "Target check: robust_filter vs CGAL jet and bilateral (lower is better)";
     tgt.header = {"N",        "sigma",         "ours CD",         "best peer CD",
@@ -233,6 +312,13 @@ void run_quality_suite(Context& ctx) {
   }
   ctx.add(std::move(settings));
   ctx.add(std::move(detail));
+}
+
+}  // namespace
+
+void run_quality_suite(Context& ctx) {
+  run_shape_set(ctx, protocol_shapes(ctx), false);
+  if (!ctx.quick) run_shape_set(ctx, limit_shapes(), true);
 }
 
 }  // namespace scanclean::bench

@@ -69,6 +69,7 @@ void run_real_suite(Context& ctx) {
   FilterSettings fs;
   fs.merge = true;
   fs.threads = ctx.threads;
+  fs.refit_spread = ctx.refit_spread;
   FilterRun run = run_robust_filter(merged, fs);
   const DistanceStats before = distance_stats(md, merged.positions);
   const DistanceStats after = distance_stats(md, run.cloud.positions);
@@ -84,13 +85,17 @@ void run_real_suite(Context& ctx) {
                     fmt(after.p95 * 1e3, 3), fmt(after.rms * 1e3, 3), fmt(run.seconds_wall, 2)});
   t.notes.push_back("robust_filter settings: " + fs.describe() + "; h = " + fmt(run.h * 1e3, 3) +
                     " mm, estimated noise sigma = " + fmt(run.noise_sigma * 1e3, 3) + " mm.");
-  t.notes.push_back("Input points removed as outliers: " + fmt_count(merged.size() - kept_inputs) +
-                    " (unsupported " + fmt_count(run.unsupported) + ", off surface " +
-                    fmt_count(run.off_surface) + ", low density " + fmt_count(run.low_density) +
-                    ", low likelihood " + fmt_count(run.low_likelihood) + ", displaced " +
-                    fmt_count(run.displaced) + ", small components " +
-                    fmt_count(run.small_components) +
-                    "); merged into other output points: " + fmt_count(run.merged) + ".");
+  t.notes.push_back(
+      "Input points removed as outliers: " + fmt_count(merged.size() - kept_inputs) +
+      " (unsupported " + fmt_count(run.unsupported) + ", off surface " +
+      fmt_count(run.off_surface) + ", low density " + fmt_count(run.low_density) +
+      ", low likelihood " + fmt_count(run.low_likelihood) + ", displaced " +
+      fmt_count(run.displaced) + ", small components " + fmt_count(run.small_components) + "; " +
+      fmt_pct(static_cast<double>(merged.size() - kept_inputs) / static_cast<double>(merged.size()),
+              2) +
+      "); merged into other output points: " + fmt_count(run.merged) +
+      "; kernels refitted on their own plane: " + fmt_count(run.kernels_refitted) + " of " +
+      fmt_count(run.kernels) + ".");
   // The setting of the 2.1M-point speed target (adaptive k = 250), with its automatic kernel
   // stride (2) and with a kernel at every point, on the same real scans.
   for (const int stride : {0, 1}) {

@@ -24,6 +24,10 @@ struct Context {
   std::vector<std::size_t> sizes;    //!< quality suite: only these N (empty = the protocol's)
   std::vector<double> sigmas;        //!< quality suite: only these noise levels (empty = all)
   bool filter_only = false;          //!< quality suite: robust_filter alone (no peers)
+  //! quality suite: only these shapes (empty = all)
+  std::vector<std::string> shape_names;
+  //! quality and real suites: FilterOptions::refit_spread (< 0: the library's default)
+  double refit_spread = -1;
   //! mesh suite: write its PNG pictures into this folder (empty: none)
   std::filesystem::path pictures_dir;
   std::vector<Table> tables;

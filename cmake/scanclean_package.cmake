@@ -172,6 +172,26 @@ if(TARGET scanclean_vsensor)
     endforeach()" COMPONENT runtime)
 endif()
 
+# --- Licence, Debian copyright file, manual page -------------------------------------------------
+# /usr/share/doc/<package>/copyright for both packages (Debian policy 12.5; it holds the text
+# of LICENSE), and scanclean(1) (packaging/scanclean.1, gzipped as Debian wants it).
+foreach(_pkg_comp "scanclean;runtime" "scanclean-dev;dev")
+  list(GET _pkg_comp 0 _pkg)
+  list(GET _pkg_comp 1 _comp)
+  install(FILES ${PROJECT_SOURCE_DIR}/packaging/copyright
+    DESTINATION ${CMAKE_INSTALL_DATAROOTDIR}/doc/${_pkg} COMPONENT ${_comp})
+endforeach()
+find_program(SCANCLEAN_GZIP gzip)
+if(SCANCLEAN_GZIP)
+  add_custom_command(OUTPUT ${PROJECT_BINARY_DIR}/scanclean.1.gz
+    COMMAND ${SCANCLEAN_GZIP} -n -9 -c ${PROJECT_SOURCE_DIR}/packaging/scanclean.1
+            > ${PROJECT_BINARY_DIR}/scanclean.1.gz
+    DEPENDS ${PROJECT_SOURCE_DIR}/packaging/scanclean.1 VERBATIM)
+  add_custom_target(scanclean_manpage ALL DEPENDS ${PROJECT_BINARY_DIR}/scanclean.1.gz)
+  install(FILES ${PROJECT_BINARY_DIR}/scanclean.1.gz
+    DESTINATION ${CMAKE_INSTALL_MANDIR}/man1 COMPONENT runtime)
+endif()
+
 # --- Debian package (cpack -G DEB in the build folder) ---------------------------------------------
 # Two packages: scanclean (program, driver folder, Python module; runtime dependencies found by
 # dpkg-shlibdeps) and scanclean-dev (headers, static libraries, CMake config, pkg-config files;

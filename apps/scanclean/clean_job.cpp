@@ -23,6 +23,9 @@
 #include "scanclean/interrupt.h"
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -170,6 +173,9 @@ void check_clean_outputs(const std::string& command, const PipelineOptions& opti
   if (!input.empty() && std::filesystem::is_regular_file(input, ec))
     inputs.push_back({"the source", input});
   check_output_files(command, inputs, {{"-o", output}, {"--outliers", outliers}});
+  std::error_code exists_ec;
+  if (!input.empty() && std::filesystem::exists(input, exists_ec))
+    note_report_input({"the source", input});  // a file or a folder (--report)
 }
 
 namespace {
@@ -190,11 +196,16 @@ std::string seconds_text(double s) {
 
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
                   const std::filesystem::path& output, const std::filesystem::path& outliers,
-                  const LiveOutputs& live) {
+                  const std::string& preview, const LiveOutputs& live) {
   check_clean_outputs(command, options, {}, output, outliers);
   if (!live.latest.empty())
     check_output_files(command, {},
                        {{"-o", output}, {"--outliers", outliers}, {"--latest", live.latest}});
+  if (!preview.empty() && options.raw)
+    throw OptionError(command + ": --preview needs the filter (it is off with --raw)");
+  check_preview_path(command, preview);
+  options.keep_input = !preview.empty();
+  std::string preview_text;  // the summary line, once the first window's preview is written
   validate(options);
   install_sigint_handler();
   options.keep_going = [] { return !interrupted(); };
@@ -242,10 +253,22 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
       return;
     }
     AtomicCommitGroup both;  // the cloud and its outliers, or neither
-    write_point_cloud(p, w.cloud);
+    WriteOptions wo;         // provenance: command line, h, noise sigma
+    wo.provenance =
+        options.raw ? provenance_text() : provenance_text(w.filter.h, w.filter.noise_sigma);
+    write_point_cloud(p, w.cloud, wo);
     if (!outliers.empty())
-      write_point_cloud(numbered ? window_path(outliers, w.window) : outliers, w.outliers);
+      write_point_cloud(numbered ? window_path(outliers, w.window) : outliers, w.outliers, wo);
     both.commit();
+    note_report_output({"-o", p});
+    if (!options.raw) note_report_filter(p.string(), w.filter);
+    if (!preview.empty() && preview_text.empty()) {
+      PreviewOptions po;
+      po.view = PreviewView::kCamera;
+      po.title = command_line();
+      preview_text =
+          preview_summary_text(preview, write_preview(preview, w.input, w.cloud, w.outliers, po));
+    }
     written.push_back(p);
   };
   const auto t_start = std::chrono::steady_clock::now();
@@ -360,6 +383,7 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
                           " .. " + written.back().string());
   }
   if (!collapsed.empty()) sum.add_count("windows not written (collapsed)", collapsed.size());
+  if (!preview_text.empty()) sum.add("preview", preview_text);
   sum.print();
   if (st.stop == StopReason::kInterrupted) return static_cast<int>(ExitCode::kInterrupted);
   if (st.stop == StopReason::kError) {

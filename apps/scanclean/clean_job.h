@@ -50,8 +50,9 @@ struct LiveOutputs {
 //! 5 when the source kept disconnecting until the --reconnect budget was used up;
 //! 6 when a window's result is empty or collapsed to one point although its input was not
 //! (that window is not written).
+//! `preview`: --preview FILE.png of the first window (preview.h), "" = none.
 int run_clean_job(const std::string& command, RangeSource& source, PipelineOptions options,
                   const std::filesystem::path& output, const std::filesystem::path& outliers,
-                  const LiveOutputs& live = {});
+                  const std::string& preview = {}, const LiveOutputs& live = {});
 
 }  // namespace scanclean::app

@@ -16,7 +16,9 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/pipeline/pipeline.h"
+#include "scanclean/preview.h"
 #include "scanclean/replay/frame_recorder.h"
+#include "scanclean/run_report.h"
 
 namespace scanclean::app {
 
@@ -32,6 +34,7 @@ struct CaptureCommandOptions {
   double seconds = 0;
   int reconnect = 0;
   bool depth_100um = false;
+  std::shared_ptr<std::string> preview;  // --preview FILE.png
 };
 
 int run_capture(const CaptureCommandOptions& c, const std::function<void(PipelineOptions&)>& apply,
@@ -64,7 +67,7 @@ int run_capture(const CaptureCommandOptions& c, const std::function<void(Pipelin
   LiveOutputs live;
   live.latest = c.latest;
   live.record = c.record;
-  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers, live);
+  const int rc = run_clean_job("capture", *source, o, c.output, c.outliers, *c.preview, live);
   source.reset();
   if (recorder) recorder->finish();
   if (!c.record.empty())
@@ -119,6 +122,8 @@ const CommandRegistrar kRegistrar{{
           "(nothing written), 130 interrupted.");
       auto apply = add_clean_options(cmd);
       auto intrinsics = add_intrinsics_options(cmd);
+      add_report_option(cmd);
+      c->preview = add_preview_option(cmd);
       return [c, apply, intrinsics] { return run_capture(*c, apply, intrinsics); };
     },
 }};

@@ -12,6 +12,8 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/io/point_cloud_io.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -39,6 +41,7 @@ int run_convert(const ConvertOptions& o) {
   WriteOptions w;
   w.ply_encoding = o.ascii ? PlyEncoding::kAscii : PlyEncoding::kBinaryLittleEndian;
   w.pcd_encoding = o.pcd_encoding;
+  w.provenance = provenance_text();
   validate(w);
 
   ReadReport r;
@@ -110,6 +113,7 @@ const CommandRegistrar kRegistrar{{
           "Units: PLY/PCD/XYZ carry no unit; values are copied unchanged (metres for the bundled "
           "data). Output is written atomically: on failure no partial file is left.\n"
           "Exit codes: 0 ok, 2 bad options, 3 bad input data, 4 file I/O failure.");
+      add_report_option(cmd);
       return [o] { return run_convert(*o); };
     },
 }};

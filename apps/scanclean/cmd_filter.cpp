@@ -16,9 +16,14 @@
 #include "scanclean/filter/robust_filter.h"
 #include "scanclean/filter_options_cli.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/io/point_stream.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
+#include "scanclean/tiled_run.h"
 
 namespace scanclean::app {
 namespace {
@@ -31,7 +36,12 @@ struct FilterCommandOptions {
   bool ascii = false;
   bool skip_missing = false;
   std::string xyz_columns;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;     // --mesh FILE
+  std::shared_ptr<std::string> preview;  // --preview FILE.png
+  std::string memory_budget;             // --memory-budget SIZE | off (default: automatic)
+  bool tiled = false;                    // --tiled: tile even when the cloud would fit
+  std::string scratch;                   // --scratch DIR
+  double halo = 4.0;                     // --halo FACTOR
 };
 
 void print_warnings(const std::string& file, const ReadReport& report) {
@@ -39,6 +49,94 @@ void print_warnings(const std::string& file, const ReadReport& report) {
   if (report.dropped_invalid > 0)
     std::fprintf(stderr, "scanclean: %s: %zu invalid points dropped while reading\n", file.c_str(),
                  report.dropped_invalid);
+}
+
+// The tiled run (tiled_run.h) when it applies: returns the exit code, or -1 to run in memory.
+int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
+  const bool off = c.memory_budget == "off";
+  if (off && c.tiled) throw OptionError("filter: --tiled needs a memory budget (not off)");
+  if (off) return -1;
+  TiledOptions t;
+  t.memory_budget = c.memory_budget.empty() ? default_memory_budget()
+                                            : parse_memory_size("--memory-budget", c.memory_budget);
+  t.halo_factor = c.halo;
+  if (!c.scratch.empty()) t.scratch = c.scratch;
+  validate(t);
+  const std::string& in = c.inputs.front();
+  if (!PointStream::streamable(in)) {
+    if (c.tiled)
+      throw OptionError(
+          "filter: --tiled needs a binary PLY or binary PCD input (streamed by "
+          "byte ranges); convert it with scanclean convert");
+    return -1;
+  }
+  const auto records = PointStream::open(in)->size();
+  if (!c.tiled && in_memory_bytes(records) <= t.memory_budget) return -1;
+  if (point_cloud_format(c.output) != "ply" ||
+      (!c.outliers.empty() && point_cloud_format(c.outliers) != "ply") || c.ascii)
+    throw OptionError("filter: the tiled (out-of-core) run of " + with_thousands(records) +
+                      " points writes binary PLY only: use a .ply output (or filter in memory: "
+                      "--memory-budget off, or a larger budget)");
+  if (!c.mesh->path.empty())
+    throw OptionError(
+        "filter: --mesh needs the whole cloud in memory; it cannot follow a tiled "
+        "run (raise --memory-budget, or mesh the output afterwards)");
+  if (!c.preview->empty())
+    throw OptionError(
+        "filter: --preview draws the whole cloud before and after; it cannot follow a tiled "
+        "run (raise --memory-budget)");
+  TiledRunRequest req;
+  req.input = in;
+  req.output = c.output;
+  req.outliers = c.outliers;
+  req.filter = o;
+  req.tiled = t;
+  FilterOptions bar_options;
+  FilterProgress progress(bar_options);
+  req.tiled.progress = bar_options.progress;
+  const TiledRunResult r = run_tiled(req);
+  progress.finish();
+  const TiledStats& s = r.stats;
+  const TiledGlobals& g = s.globals;
+  Summary sum("scanclean filter (tiled, out of core)");
+  sum.add("input", in);
+  sum.add_count("points in", s.points_in);
+  sum.add_count("points out", s.points_out);
+  sum.add_count("merged into others", s.merged);
+  sum.add("outliers removed",
+          with_thousands(s.outliers) + " (unsupported " + with_thousands(s.unsupported) + ")");
+  if (!c.outliers.empty()) sum.add("outliers file", r.written ? c.outliers : "not written");
+  sum.add("output file", r.written ? c.output : "not written (collapsed result)");
+  sum.add("scale", std::string(scale_mode_name(o.scale)));
+  sum.add("h", g.h * 1000.0, 3, "mm");
+  if (o.scale == ScaleMode::kAuto)
+    sum.add("noise sigma (estimate)", g.noise_sigma * 1000.0, 3, "mm");
+  sum.add("merge eps", g.merge_eps * 1000.0, 3, "mm");
+  sum.add("kernel stride", std::to_string(g.kernel_stride));
+  char halo[48];
+  std::snprintf(halo, sizeof halo, "%.1f mm", g.halo * 1000.0);
+  sum.add("tiles", std::to_string(s.tiles) + " (halo " + halo + ", " +
+                       with_thousands(s.halo_points) + " halo points, largest tile " +
+                       with_thousands(s.tile_points_max) + ")");
+  char phases[160];
+  std::snprintf(phases, sizeof phases, "first pass %.2f, distribution %.2f, tiles %.2f s",
+                s.seconds_globals, s.seconds_distribute, s.seconds_tiles);
+  sum.add("time", phases);
+  sum.add("total", s.seconds_total, 2, "s");
+  sum.add_count("points per second", static_cast<unsigned long long>(
+                                         s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
+  sum.add("memory budget", static_cast<double>(t.memory_budget) / 1048576.0, 0, "MiB");
+  sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
+  sum.print();
+  if (!r.written) {
+    std::fprintf(stderr,
+                 "scanclean filter: error: the result has %llu point(s) from %llu input points, "
+                 "nothing usable; nothing was written; check --h, --k and --merge-eps\n",
+                 static_cast<unsigned long long>(s.points_out),
+                 static_cast<unsigned long long>(s.points_in));
+    return static_cast<int>(ExitCode::kEmptyResult);
+  }
+  return 0;
 }
 
 int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
@@ -72,6 +170,13 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   if (!c.xyz_columns.empty()) xyz.columns = parse_xyz_columns(c.xyz_columns);
 
   check_mesh_output(*c.mesh, "filter");
+  check_preview_path("filter", *c.preview);
+
+  // Out of core: one binary PLY/PCD input larger than the memory budget (or --tiled).
+  if (c.conf.empty() && c.inputs.size() == 1) {
+    const int tiled = run_filter_tiled(c, o);
+    if (tiled >= 0) return tiled;
+  }
 
   PointCloud cloud;
   std::size_t files = 0;
@@ -87,6 +192,9 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
     ConfOptions conf_options;
     conf_options.skip_missing = c.skip_missing;
     PointCloud part = read_and_merge_conf(c.conf, &report, conf_options);
+    if (report_path())  // --report: the scans the session read, too
+      for (const auto& scan : read_conf(c.conf).files)
+        if (std::filesystem::exists(scan)) note_report_input({"--conf scan", scan});
     print_warnings(c.conf, report);
     append(cloud, part);
     ++files;
@@ -104,6 +212,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   const bool collapsed = (r.cloud.empty() && r.stats.points_in >= 1) ||
                          (r.cloud.size() == 1 && r.stats.points_in >= 2);
   if (!collapsed) {
+    w.provenance = provenance_text(r.stats.h, r.stats.noise_sigma);
     AtomicCommitGroup both;  // the cleaned cloud and the outliers, or neither
     write_point_cloud(c.output, r.cloud, w);
     if (!c.outliers.empty()) write_point_cloud(c.outliers, r.outliers, w);
@@ -156,6 +265,13 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
                                          s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
   sum.add("threads", std::to_string(s.threads));
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
+  note_report_filter(c.output, s);
+  if (!c.preview->empty() && !collapsed) {
+    PreviewOptions po;
+    po.title = command_line();
+    sum.add("preview", preview_summary_text(
+                           *c.preview, write_preview(*c.preview, cloud, r.cloud, r.outliers, po)));
+  }
   run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
   if (collapsed) {
@@ -194,6 +310,19 @@ const CommandRegistrar kRegistrar{{
                      "default: guessed from the first line (see scanclean info)");
       cmd.add_flag("--ascii", c->ascii, "Write ASCII PLY/PCD instead of binary");
       c->mesh = add_mesh_option(cmd);
+      add_report_option(cmd);
+      c->preview = add_preview_option(cmd);
+      cmd.add_option("--memory-budget", c->memory_budget,
+                     "Peak memory to aim for, e.g. 2G or 1536M (default: 2G, or half the "
+                     "machine's memory if less); a binary PLY/PCD input that needs more is "
+                     "filtered out of core, by tiles (output: binary PLY); 'off' never tiles");
+      cmd.add_flag("--tiled", c->tiled,
+                   "Filter by tiles even when the cloud fits the memory budget");
+      cmd.add_option("--scratch", c->scratch,
+                     "Folder for the tiled run's scratch files (default: a private folder "
+                     "beside the output; about the input's size, removed at the end)");
+      cmd.add_option("--halo", c->halo,
+                     "Tiled run: the halo around each tile, in units of h (default 4)");
       auto values = add_filter_options(cmd);
       return [c, values] { return run_filter(*c, *values); };
     },

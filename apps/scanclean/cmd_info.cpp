@@ -14,6 +14,7 @@
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -80,6 +81,7 @@ std::string fmt(double v, int precision) {
 
 void describe(const std::string& path, bool skip_missing, std::size_t max_warnings,
               const XyzOptions& xyz) {
+  note_report_input({"files", path});
   ReadReport r;
   PointCloud c;
   const bool conf = std::filesystem::path(path).extension() == ".conf";
@@ -187,6 +189,7 @@ const CommandRegistrar kRegistrar{{
           "metres for the bundled data (Stanford and PCL scans).\n"
           "Every file is read even if an earlier one fails; the exit code is that of the worst "
           "failure: 0 ok, 3 bad input data, 4 file I/O failure.");
+      add_report_option(cmd);
       return [o] { return run_info(*o); };
     },
 }};

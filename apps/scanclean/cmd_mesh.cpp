@@ -18,6 +18,7 @@
 #include "scanclean/mesh/mesh_io.h"
 #include "scanclean/mesh/surface_reconstruction.h"
 #include "scanclean/mesh_handoff.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 
 namespace scanclean::app {
@@ -55,6 +56,8 @@ int run_mesh(MeshCommandOptions c) {
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                   static_cast<std::size_t>(c.threads));
 
+  note_report_input({"input", c.input});
+  note_report_output({"-o", c.output});
   ReadReport report;
   PointCloud cloud = read_point_cloud(c.input, &report);
   for (const auto& w : report.warnings) std::fprintf(stderr, "scanclean: warning: %s\n", w.c_str());
@@ -116,6 +119,7 @@ const CommandRegistrar kRegistrar{{
           ->required();
       cmd.add_option("-o,--output", c->output, "Output mesh (.ply, written atomically)")
           ->required();
+      add_report_option(cmd);
       cmd.add_option("--method", c->method, "afront or poisson (see below)")
           ->check(CLI::IsMember({"afront", "poisson"}))
           ->capture_default_str();

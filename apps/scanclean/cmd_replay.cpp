@@ -15,6 +15,8 @@
 #include "scanclean/drivers/make_range_source.h"
 #include "scanclean/mesh_handoff.h"
 #include "scanclean/pipeline/pipeline.h"
+#include "scanclean/preview.h"
+#include "scanclean/run_report.h"
 
 namespace scanclean::app {
 
@@ -27,7 +29,8 @@ struct ReplayCommandOptions {
   std::string frames;
   std::string depth_format = "auto";
   bool paced = false;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;     // --mesh FILE
+  std::shared_ptr<std::string> preview;  // --preview FILE.png
 };
 
 int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineOptions&)>& apply,
@@ -42,7 +45,7 @@ int run_replay(const ReplayCommandOptions& c, const std::function<void(PipelineO
   check_clean_outputs("replay", o, c.source, c.output, c.outliers);
   check_mesh_output(*c.mesh, "replay");
   auto source = make_range_source(c.source, so);
-  const int rc = run_clean_job("replay", *source, o, c.output, c.outliers);
+  const int rc = run_clean_job("replay", *source, o, c.output, c.outliers, *c.preview);
   return mesh_written_output(*c.mesh, c.output, "replay", rc);
 }
 
@@ -72,6 +75,8 @@ const CommandRegistrar kRegistrar{{
                    "possible)");
       auto apply = add_clean_options(cmd);
       c->mesh = add_mesh_option(cmd);
+      add_report_option(cmd);
+      c->preview = add_preview_option(cmd);
       return [c, apply, intrinsics] { return run_replay(*c, apply, intrinsics); };
     },
 }};

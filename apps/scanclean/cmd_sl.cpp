@@ -22,6 +22,10 @@
 #include "scanclean/drivers/sl_plane_fit.h"
 #include "scanclean/drivers/structured_light_source.h"
 #include "scanclean/mesh_handoff.h"
+#include "scanclean/output_checks.h"
+#include "scanclean/preview.h"
+#include "scanclean/provenance.h"
+#include "scanclean/run_report.h"
 #include "scanclean/summary.h"
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -73,12 +77,14 @@ struct SlCommandOptions {
   int corner_window = 20;
   bool estimate_k3 = false;
   bool zero_tangential = false;
-  std::shared_ptr<MeshHandoff> mesh;  // --mesh FILE
+  std::shared_ptr<MeshHandoff> mesh;                                       // --mesh FILE
+  std::shared_ptr<std::string> preview = std::make_shared<std::string>();  // --preview
 };
 
-//! The parent folder of an output must exist and the extension be one of `exts`.
-void check_output(const std::string& option, const std::string& file,
-                  const std::vector<std::string>& exts) {
+//! The extension of an output must be one of `exts`; its folder must exist and be writable,
+//! and it must not be one of `inputs` (the shared checks of every command, output_checks.h).
+void check_output(const std::string& command, const std::string& option, const std::string& file,
+                  const std::vector<std::string>& exts, const std::vector<PathArg>& inputs = {}) {
   const std::filesystem::path p(file);
   std::string ext = p.extension().string();
   for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
@@ -89,10 +95,7 @@ void check_output(const std::string& option, const std::string& file,
     list += (list.empty() ? "" : " ") + e;
   }
   if (!ok) throw OptionError(option + ": '" + file + "' must end in one of: " + list);
-  const auto parent = p.parent_path();
-  std::error_code ec;
-  if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
-    throw OptionError(option + ": folder '" + parent.string() + "' does not exist");
+  check_output_files(command, inputs, {{option, p}}, false);
 }
 
 SlChessboard chessboard_of(const SlCommandOptions& c) {
@@ -212,10 +215,15 @@ int run_decode(const SlCommandOptions& c) {
   if (!(c.residual_range_m > 0)) throw OptionError("--residual-range: expected > 0 metres");
   if (!c.residual_map.empty()) {
     if (!c.fit_plane) throw OptionError("--residual-map needs --fit-plane");
-    check_output("--residual-map", c.residual_map + "_raw.png", {".png"});
+    check_output("sl decode", "--residual-map", c.residual_map + "_raw.png", {".png"});
   }
-  check_output("-o", c.output, {".ply", ".pcd", ".xyz"});
+  check_output("sl decode", "-o", c.output, {".ply", ".pcd", ".xyz"});
   check_mesh_output(*c.mesh, "sl decode");
+  if (!c.preview->empty() && !c.filter) throw OptionError("sl decode: --preview needs --filter");
+  check_preview_path("sl decode", *c.preview);
+  note_report_input({"capture", c.capture});
+  if (!c.calib.empty()) note_report_input({"--calib", c.calib});
+  note_report_output({"-o", c.output});
   if (!is_structured_light_capture(c.capture)) {
     const auto found = find_structured_light_captures(c.capture);
     throw InputError(c.capture, "",
@@ -228,6 +236,7 @@ int run_decode(const SlCommandOptions& c) {
   const SlResult r = process_sl_capture(c.capture, o);
   std::string how;
   PointCloud cloud = frame_cloud(r.frame, &how);
+  std::string provenance = provenance_text();  // with the filter's h when it runs
 
   Summary sum("scanclean sl decode");
   sum.add("capture", c.capture + " (" + r.info.layout + " layout)");
@@ -307,6 +316,15 @@ int run_decode(const SlCommandOptions& c) {
     validate(fo);
     FilterResult fr = robust_filter(cloud, fo);
     progress.finish();
+    if (!c.preview->empty()) {
+      PreviewOptions po;
+      po.view = PreviewView::kCamera;
+      po.title = command_line();
+      sum.add("preview", preview_summary_text(*c.preview, write_preview(*c.preview, cloud, fr.cloud,
+                                                                        fr.outliers, po)));
+    }
+    note_report_filter(c.output, fr.stats);
+    provenance = provenance_text(fr.stats.h, fr.stats.noise_sigma);
     sum.add("filter", with_thousands(fr.stats.points_out) + " points out, h " +
                           std::to_string(fr.stats.h * 1e3).substr(0, 6) + " mm, " +
                           std::to_string(fr.stats.seconds_total).substr(0, 5) + " s");
@@ -331,6 +349,7 @@ int run_decode(const SlCommandOptions& c) {
     w.ply_encoding = PlyEncoding::kAscii;
     w.pcd_encoding = "ascii";
   }
+  w.provenance = provenance;
   write_point_cloud(c.output, cloud, w);
   sum.add("output file", c.output + " (metres, camera frame)");
   run_mesh_handoff(*c.mesh, cloud, 0.0, sum);
@@ -379,8 +398,14 @@ int run_calibrate(const SlCommandOptions& c) {
   co.estimate_k3 = c.estimate_k3;
   co.zero_tangential = c.zero_tangential;
   validate(co);
-  check_output("-o", c.output, {".yml", ".yaml"});
-  if (!c.kamino_xml.empty()) check_output("--kamino-xml", c.kamino_xml, {".xml"});
+  const std::vector<PathArg> references = {{"--compare", c.compare}};
+  check_output("sl calibrate", "-o", c.output, {".yml", ".yaml"}, references);
+  if (!c.kamino_xml.empty()) {
+    check_output("sl calibrate", "--kamino-xml", c.kamino_xml, {".xml"}, references);
+    check_output_files("sl calibrate", references,
+                       {{"-o", c.output}, {"--kamino-xml", c.kamino_xml}}, false);
+  }
+  for (const auto& a : c.captures) note_report_input({"captures", a});
   std::vector<std::filesystem::path> folders;
   for (const auto& a : c.captures) {
     const auto found = find_structured_light_captures(a);
@@ -496,6 +521,7 @@ CLI::App* add_calibrate_command(CLI::App& cmd, SlCommandOptions& c) {
                   "Capture folders (or folders of captures), one board pose each")
       ->required();
   cal->add_option("-o,--output", c.output, "Output calib.yml")->required();
+  add_report_option(*cal);
   cal->add_option("--kamino-xml", c.kamino_xml,
                   "Also write kamino410/procam-calibration's calibration_result.xml layout "
                   "(translation in millimetres)");
@@ -604,6 +630,8 @@ const CommandRegistrar kRegistrar{{
                       "Colour range of the residual maps, +- metres")
           ->default_val(0.005);
       c->mesh = add_mesh_option(*dec);
+      add_report_option(*dec);
+      c->preview = add_preview_option(*dec);
       dec->add_option("--threads", c->threads, "Worker threads, 0 = all cores (same result)")
           ->default_val(0);
       auto* cal = add_calibrate_command(cmd, *c);

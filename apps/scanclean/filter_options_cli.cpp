@@ -58,6 +58,12 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
                  "Drop points whose density is below tau x the median density (0 = off)")
       ->check(number_in(0, 1))
       ->capture_default_str();
+  cmd.add_option("--refit-spread", v->refit_spread,
+                 "Refit a kernel on the neighbours near the plane through its own point when its "
+                 "plane leaves more than this many noise sigma as spread (two sheets within h, a "
+                 "crease; automatic h only; 0 = off; 1.2 suits CAD parts and thin parts)")
+      ->check(number_in(0, 100))
+      ->capture_default_str();
   cmd.add_option("--outlier-sigma", v->outlier_sigma,
                  "Before projecting, drop points farther than this many standard deviations "
                  "from every kernel around them, each kernel refitted without the point and its "
@@ -113,6 +119,7 @@ FilterCliValues values_of(const FilterOptions& o) {
   v.likelihood_ratio = o.likelihood_ratio;
   v.displacement_sigma = o.displacement_sigma;
   v.outlier_sigma = o.outlier_sigma;
+  v.refit_spread = o.refit_spread;
   v.tau = o.tau;
   v.passes = o.passes;
   v.k_min = o.k_min;
@@ -138,6 +145,7 @@ FilterOptions to_filter_options(const FilterCliValues& c) {
   o.likelihood_ratio = c.likelihood_ratio;
   o.displacement_sigma = c.displacement_sigma;
   o.outlier_sigma = c.outlier_sigma;
+  o.refit_spread = c.refit_spread;
   o.k_min = c.k_min;
   o.max_iterations = c.max_iterations;
   o.update = c.update == "vector" ? UpdateMode::kVector : UpdateMode::kNormal;

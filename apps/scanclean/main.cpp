@@ -5,9 +5,11 @@
 #include <algorithm>
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
+#include "scanclean/run_report.h"
 
 namespace {
 
@@ -47,10 +49,17 @@ int main(int argc, char** argv) {
     return rc == 0 ? 0 : static_cast<int>(ExitCode::kBadOptions);
   }
 
+  int rc = 0;
+  std::string error;
   try {
-    return selected ? selected() : static_cast<int>(ExitCode::kBadOptions);
+    scanclean::app::begin_report(app, argc, argv);  // --report: checked before any work
+    rc = selected ? selected() : static_cast<int>(ExitCode::kBadOptions);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "scanclean: error: %s\n", e.what());
-    return static_cast<int>(scanclean::exit_code_for(e));
+    rc = static_cast<int>(scanclean::exit_code_for(e));
+    error = e.what();
   }
+  if (!scanclean::app::end_report(rc, error) && rc == 0)
+    rc = static_cast<int>(ExitCode::kIoFailure);
+  return rc;
 }

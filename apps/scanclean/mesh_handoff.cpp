@@ -9,6 +9,7 @@
 #include "scanclean/core/progress.h"
 #include "scanclean/mesh/mesh_io.h"
 #include "scanclean/mesh/surface_reconstruction.h"
+#include "scanclean/provenance.h"
 #endif
 #if defined(SCANCLEAN_HAVE_IO)
 #include "scanclean/io/point_cloud_io.h"
@@ -105,7 +106,9 @@ MeshResult mesh_and_write(const PointCloud& cloud, MeshOptions o, const std::str
   o.progress = phase_bars(bar);
   MeshResult r = reconstruct_surface(cloud, o);
   bar.reset();
-  write_mesh_ply(path, r.mesh, w);
+  MeshWriteOptions with_provenance = w;
+  with_provenance.comments.push_back(provenance_text(o.h));
+  write_mesh_ply(path, r.mesh, with_provenance);
   return r;
 }
 

@@ -8,6 +8,7 @@
 #include <system_error>
 
 #include "scanclean/core/errors.h"
+#include "scanclean/run_report.h"
 
 namespace scanclean::app {
 
@@ -49,6 +50,7 @@ void check_input_files(const std::string& command, const std::vector<PathArg>& i
     if (fs::is_directory(st))
       throw InputError(command + ": " + named(in) +
                        ": is a folder; expected a point-cloud file (.ply .pcd .xyz .txt)");
+    note_report_input(in);
   }
 }
 
@@ -77,6 +79,16 @@ void check_output_files(const std::string& command, const std::vector<PathArg>& 
       if (!outputs[j].path.empty() && same_file(out.path, outputs[j].path))
         throw OptionError(command + ": " + named(out) + " and " + named(outputs[j]) +
                           " are the same file; give them different names");
+    note_report_output(out);
+  }
+  // The run's --report (run_report.h) must not overwrite an input or an output either.
+  if (const auto report = report_path()) {
+    const PathArg r{"--report", *report};
+    for (const auto* list : {&inputs, &outputs})
+      for (const auto& p : *list)
+        if (!p.path.empty() && same_file(r.path, p.path))
+          throw OptionError(command + ": " + named(r) + " is the same file as the " + named(p) +
+                            "; give it another name");
   }
 }
 

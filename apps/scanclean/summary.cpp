@@ -4,10 +4,12 @@
 #include <iomanip>
 #include <sstream>
 
+#include "scanclean/run_report.h"
+
 namespace scanclean::app {
 
 Summary& Summary::add(std::string key, std::string value) {
-  rows_.emplace_back(std::move(key), std::move(value));
+  rows_.push_back({std::move(key), std::move(value), std::nullopt, {}, false});
   return *this;
 }
 
@@ -15,21 +17,23 @@ Summary& Summary::add(std::string key, double value, int precision, const std::s
   std::ostringstream os;
   os << std::fixed << std::setprecision(precision) << value;
   if (!unit.empty()) os << ' ' << unit;
-  return add(std::move(key), os.str());
+  rows_.push_back({std::move(key), os.str(), value, unit, false});
+  return *this;
 }
 
 Summary& Summary::add_count(std::string key, unsigned long long value) {
-  return add(std::move(key), with_thousands(value));
+  rows_.push_back({std::move(key), with_thousands(value), static_cast<double>(value), {}, true});
+  return *this;
 }
 
 void Summary::print() const {
   std::size_t width = 0;
-  for (const auto& r : rows_) width = std::max(width, r.first.size());
+  for (const auto& r : rows_) width = std::max(width, r.key.size());
   std::printf("%s\n", title_.c_str());
   for (const auto& r : rows_)
-    std::printf("  %-*s  %s\n", static_cast<int>(width + 1), (r.first + ":").c_str(),
-                r.second.c_str());
+    std::printf("  %-*s  %s\n", static_cast<int>(width + 1), (r.key + ":").c_str(), r.text.c_str());
   std::fflush(stdout);
+  note_report_summary(title_, rows_);
 }
 
 std::string with_thousands(unsigned long long value) {

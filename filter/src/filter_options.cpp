@@ -68,6 +68,7 @@ void validate(const FilterOptions& o) {
   check_real("likelihood_ratio", o.likelihood_ratio, 0, 1, false);
   check_real("displacement_sigma", o.displacement_sigma, 0, 100, false);
   check_real("outlier_sigma", o.outlier_sigma, 0, 100, false);
+  check_real("refit_spread", o.refit_spread, 0, 100, false);
   if (o.min_component_size > 1000000000ULL)
     bad_option("min_component_size", to_str(o.min_component_size),
                "0 (automatic) or a point count <= 1e9");
@@ -78,6 +79,7 @@ FilterOptions depth_frame_options() {
   FilterOptions o;
   o.scale_gamma = 0;
   o.displacement_sigma = 0;
+  o.refit_spread = 0;
   return o;
 }
 

@@ -41,10 +41,12 @@ bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
 //! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
 //! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
 //! normal is the sensor normal; otherwise it is the PCA normal. Returns false if fewer than
-//! k_min neighbours remain.
+//! k_min neighbours remain. `untrimmed` (optional) receives the neighbours as gathered, before
+//! trimming (for the own-plane refit, plane_refit.h).
 template <class Visit>
 bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool oriented,
-                double eigen_floor, Visit&& visit, KernelFit& out) {
+                double eigen_floor, Visit&& visit, KernelFit& out,
+                std::vector<FitSample>* untrimmed = nullptr) {
   if (!(h > 0)) return false;
   const Eigen::Vector3d pi = d.p[i];
   const double h2 = h * h, inv_h2 = 1.0 / h2;
@@ -62,6 +64,7 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
     t *= t;
     nb.push_back({dj.x(), dj.y(), dj.z(), t});
   });
+  if (untrimmed) *untrimmed = nb;
   if (!fit_samples(nb, pi, h, k_min, eigen_floor, out)) return false;
   out.n = use_dir ? vi : out.e.col(0).cast<float>().normalized();
   return true;

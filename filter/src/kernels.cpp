@@ -5,6 +5,7 @@
 
 #include "kernel_fit.h"
 #include "parallel.h"
+#include "plane_refit.h"
 
 namespace scanclean::detail {
 
@@ -22,23 +23,38 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   nref.assign(n, Eigen::Vector3f::Zero());
   const double floor2 = o.eigen_floor * o.eigen_floor;
   const bool by_slot = ids == PointIndexIds::kSlots;
+  PlaneRefit refit;
+  refit.sigma = prm.noise_sigma;
+  refit.ratio = o.refit_spread;
+  refit.k_min = o.k_min;
+  refit.eigen_floor = o.eigen_floor;
+  std::vector<std::uint8_t> refitted(refit.active() ? nk : 0, 0);
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     if (i % stride != 0) return;  // d is in grid order: a spatially even subsample
     const double h = d.hi_at(i);
     const Eigen::Vector3f qi =
         by_slot ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
     KernelFit fit;
-    const bool ok = fit_kernel(
-        d, i, h, o.k_min, prm.oriented, o.eigen_floor,
-        [&](auto&& g) {
-          auto cb = [&](std::uint32_t j, float) { g(j); };
-          if (by_slot)
-            idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
-          else
-            idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
-        },
-        fit);
+    auto visit = [&](auto&& g) {
+      auto cb = [&](std::uint32_t j, float) { g(j); };
+      if (by_slot)
+        idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
+      else
+        idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
+    };
+    const bool ok = fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, fit);
     if (!ok) return;
+    if (wants_refit(fit, refit)) {
+      // Rare on smooth surfaces: only here are the neighbours gathered again, untrimmed (the
+      // same fit is solved again on the way).
+      thread_local std::vector<FitSample> gathered;
+      KernelFit again;
+      fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, again, &gathered);
+      if (refit_own_plane(gathered, d.p[i], h, refit, fit)) {
+        refitted[i / stride] = 1;
+        if (!(prm.oriented && d.has_v(i))) fit.n = fit.e.col(0).cast<float>().normalized();
+      }
+    }
     nref[i] = fit.n;
     if (prm.support) (*prm.support)[i] = static_cast<float>(fit.weight - 1.0);
     if (!(d.w_at(i) > 0)) return;  // a zero-weight kernel contributes nothing
@@ -54,6 +70,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   point_index.reset();  // the point index is not needed any more (memory)
   KernelSet ks;
   for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
+  for (std::uint8_t r : refitted) ks.refitted += r;
   // Compact the valid kernels (in place, with their fits), index their centres, then permute
   // the records in place into the index's slot order, cycle by cycle (no second copy: memory).
   std::size_t m = 0;

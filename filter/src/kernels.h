@@ -23,6 +23,7 @@ struct KernelSet {
   std::vector<KernelRecord> records;     //!< one per slot of index
   std::vector<KernelFitRecord> fits;     //!< one per slot, when kept (KernelParams::keep_fits)
   std::size_t fitted = 0;                //!< points that got a kernel (including w = 0)
+  std::size_t refitted = 0;              //!< kernels refitted on their own plane (plane_refit.h)
 };
 
 struct KernelParams {
@@ -35,6 +36,8 @@ struct KernelParams {
   //! When set: per point of d, its own kernel's support (chi-weighted neighbour count, itself
   //! left out); -1 where it has no kernel.
   std::vector<float>* support = nullptr;
+  //! The own-plane refit (plane_refit.h): the cloud's noise sigma (0 = no refit).
+  double noise_sigma = 0;
 };
 
 //! How the point index passed to build_kernels numbers the points of d.

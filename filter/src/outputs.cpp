@@ -1,5 +1,7 @@
 #include "outputs.h"
 
+#include <array>
+#include <cmath>
 #include <cstddef>
 
 #include "parallel.h"
@@ -49,7 +51,7 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     out.grid = OrganizedGrid{};
     out.normals.resize(kept.size());
     std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
-        si(kept.size());
+        si(kept.size()), dn(kept.size());
     parallel_each(kept.size(), [&](std::size_t k) {
       const std::uint32_t r = kept[k], s = cl.seed[r];
       out.positions[k] = cl.position[r] + origin;
@@ -59,12 +61,34 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       fl[k] = pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0;
       mc[k] = static_cast<double>(members(r));
       si[k] = src[s];
+      // How far the filter moved the point: from its seed's input position, along the normal.
+      dn[k] = (out.positions[k] - input.positions[src[s]]).dot(pr.normal[s].cast<double>());
     });
+    if (input.has_colors()) {
+      // A merged point takes the mean colour of the input points it stands for (coincident
+      // copies count with their first copy's colour).
+      std::vector<std::array<double, 5>> acc(R, std::array<double, 5>{0, 0, 0, 0, 0});
+      for (std::size_t s = 0; s < N; ++s) {
+        const std::uint32_t r = cl.rep_of[s];
+        if (r == kNone || rep_drop[r] != Removal::kKept) continue;
+        const double m = static_cast<double>(mult(s));
+        const auto& c = input.colors[src[s]];
+        for (int ch = 0; ch < 4; ++ch) acc[r][ch] += m * c[ch];
+        acc[r][4] += m;
+      }
+      for (std::size_t k = 0; k < kept.size(); ++k) {
+        const auto& a = acc[kept[k]];
+        if (a[4] > 0)
+          for (int ch = 0; ch < 4; ++ch)
+            out.colors[k][ch] = static_cast<std::uint8_t>(std::lround(a[ch] / a[4]));
+      }
+    }
     out.set_attribute("likelihood", AttributeType::kFloat32, std::move(L));
     out.set_attribute("iterations", AttributeType::kUInt8, std::move(it));
     out.set_attribute("flags", AttributeType::kUInt8, std::move(fl));
     out.set_attribute("merge_count", AttributeType::kUInt32, std::move(mc));
     out.set_attribute("source_index", AttributeType::kUInt32, std::move(si));
+    out.set_attribute("displacement", AttributeType::kFloat32, std::move(dn));
     st.points_out = kept.size();
     for (std::uint32_t r : kept) st.merged += members(r) - 1;
   }

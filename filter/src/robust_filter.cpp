@@ -239,6 +239,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   prm.cell = h;
   prm.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
   prm.stride = kernel_stride(o, h, st.h0);
+  if (o.scale == ScaleMode::kAuto) prm.noise_sigma = std::max(st.noise_sigma, o.eigen_floor * h);
   st.kernel_stride = static_cast<int>(prm.stride);
   t = Clock::now();
   std::vector<Eigen::Vector3f> nref;
@@ -251,6 +252,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   prm.support = nullptr;
   std::vector<Eigen::Vector3d> x = std::move(d.p);  // projected positions, initially the input
   st.kernels = ks.fitted;
+  st.kernels_refitted = ks.refitted;
   st.seconds_kernels += seconds_since(t);
 
   // 3. Projection, after the density test on each point's own kernel support and, point by

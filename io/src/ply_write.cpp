@@ -10,6 +10,7 @@
 
 #include "file_bytes.h"
 #include "header_comment.h"
+#include "ply_encode.h"
 #include "position_precision.h"
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/io/ply.h"
@@ -17,7 +18,7 @@
 namespace scanclean {
 namespace {
 
-enum class Out { kUInt8, kInt32, kUInt32, kFloat32, kFloat64 };
+using Out = AttributeType;  // the PLY value types are the attribute types
 
 struct OutColumn {
   std::string name;
@@ -25,63 +26,7 @@ struct OutColumn {
   std::function<double(std::size_t)> get;
 };
 
-const char* ply_name(Out t) {
-  switch (t) {
-    case Out::kUInt8:
-      return "uchar";
-    case Out::kInt32:
-      return "int";
-    case Out::kUInt32:
-      return "uint";
-    case Out::kFloat32:
-      return "float";
-    case Out::kFloat64:
-      return "double";
-  }
-  return "";
-}
-
-Out out_type(AttributeType t) {
-  switch (t) {
-    case AttributeType::kUInt8:
-      return Out::kUInt8;
-    case AttributeType::kInt32:
-      return Out::kInt32;
-    case AttributeType::kUInt32:
-      return Out::kUInt32;
-    case AttributeType::kFloat32:
-      return Out::kFloat32;
-    case AttributeType::kFloat64:
-      return Out::kFloat64;
-  }
-  return Out::kFloat64;
-}
-
-std::string sanitize(std::string name) {
-  for (char& c : name)
-    if (c == ' ' || c == '\t' || c == '\n' || c == '\r') c = '_';
-  return name.empty() ? std::string("unnamed") : name;
-}
-
-template <class T>
-void put(std::string& buf, T v) {
-  if constexpr (std::endian::native == std::endian::big && sizeof(T) > 1) {
-    unsigned char b[sizeof(T)];
-    std::memcpy(b, &v, sizeof(T));
-    std::reverse(b, b + sizeof(T));
-    buf.append(reinterpret_cast<const char*>(b), sizeof(T));
-  } else {
-    buf.append(reinterpret_cast<const char*>(&v), sizeof(T));
-  }
-}
-
-template <class I>
-I clamp_int(double v) {
-  if (!(v == v)) return 0;
-  const double lo = static_cast<double>(std::numeric_limits<I>::min());
-  const double hi = static_cast<double>(std::numeric_limits<I>::max());
-  return static_cast<I>(std::llround(std::clamp(v, lo, hi)));
-}
+using io_detail::clamp_int;
 
 void put_value(std::string& buf, Out t, double v, bool ascii) {
   if (ascii) {
@@ -104,23 +49,7 @@ void put_value(std::string& buf, Out t, double v, bool ascii) {
     }
     return;
   }
-  switch (t) {
-    case Out::kUInt8:
-      put(buf, clamp_int<std::uint8_t>(v));
-      break;
-    case Out::kInt32:
-      put(buf, clamp_int<std::int32_t>(v));
-      break;
-    case Out::kUInt32:
-      put(buf, clamp_int<std::uint32_t>(v));
-      break;
-    case Out::kFloat32:
-      put(buf, static_cast<float>(v));
-      break;
-    case Out::kFloat64:
-      put(buf, v);
-      break;
-  }
+  io_detail::put_ply_binary(buf, t, v);
 }
 
 }  // namespace
@@ -153,8 +82,8 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
                       [&cloud, k](std::size_t i) { return double(cloud.colors[i][k]); }});
   }
   for (const auto& a : cloud.attributes)
-    cols.push_back(
-        {sanitize(a.name), out_type(a.type), [&a](std::size_t i) { return a.values[i]; }});
+    cols.push_back({io_detail::sanitize_ply_name(a.name), a.type,
+                    [&a](std::size_t i) { return a.values[i]; }});
 
   std::string header = "ply\nformat ";
   header += ascii ? "ascii 1.0\n" : "binary_little_endian 1.0\n";
@@ -167,7 +96,7 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
   }
   header += "element vertex " + std::to_string(n) + "\n";
   for (const auto& c : cols)
-    header += std::string("property ") + ply_name(c.type) + " " + c.name + "\n";
+    header += std::string("property ") + io_detail::ply_type_name(c.type) + " " + c.name + "\n";
   if (grid) {
     header += "element range_grid " + std::to_string(cloud.grid.index.size()) + "\n";
     header += "property list uchar int vertex_indices\n";
@@ -197,10 +126,10 @@ void write_ply(const std::filesystem::path& path, const PointCloud& cloud, PlyEn
         if (ascii) {
           buf += idx < 0 ? "0\n" : "1 " + std::to_string(idx) + "\n";
         } else if (idx < 0) {
-          put(buf, std::uint8_t{0});
+          io_detail::put_le(buf, std::uint8_t{0});
         } else {
-          put(buf, std::uint8_t{1});
-          put(buf, idx);
+          io_detail::put_le(buf, std::uint8_t{1});
+          io_detail::put_le(buf, idx);
         }
         flush(false);
       }

@@ -1,7 +1,9 @@
 #include "scanclean/pipeline/accumulate.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <string>
 
 #include "scanclean/core/errors.h"
@@ -39,6 +41,8 @@ std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clou
   const bool normals = std::all_of(clouds.begin(), clouds.end(), [](const PointCloud& c) {
     return c.has_normals() || c.empty();
   });
+  const bool colors = std::all_of(clouds.begin(), clouds.end(),
+                                  [](const PointCloud& c) { return c.has_colors() || c.empty(); });
   std::size_t dropped = 0;
   std::vector<std::pair<double, std::size_t>> samples;  // (z, cloud) of one pixel
   std::vector<double> zs;
@@ -57,6 +61,7 @@ std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clou
     const double band = options.max_depth_deviation_factor * std::abs(z_med);
     Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
     double w = 0;
+    std::array<double, 4> rgba{0, 0, 0, 0};
     std::size_t kept = 0;
     for (const auto& [z, k] : samples) {
       if (std::abs(z - z_med) > band) {
@@ -66,6 +71,8 @@ std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clou
       const auto i = static_cast<std::size_t>(clouds[k].grid.index[cell]);
       p += clouds[k].positions[i];
       if (normals) n += clouds[k].normals[i].cast<double>();
+      if (colors)
+        for (int ch = 0; ch < 4; ++ch) rgba[ch] += clouds[k].colors[i][ch];
       w += clouds[k].has_confidences() ? static_cast<double>(clouds[k].confidences[i]) : 1.0;
       ++kept;
     }
@@ -78,6 +85,12 @@ std::optional<PointCloud> fuse_static_clouds(const std::vector<PointCloud>& clou
                                        : Eigen::Vector3f::Zero());
     }
     out.confidences.push_back(static_cast<float>(std::clamp(w / frames, 0.0, 1.0)));
+    if (colors) {  // the mean colour of the samples kept
+      std::array<std::uint8_t, 4> c{};
+      for (int ch = 0; ch < 4; ++ch)
+        c[ch] = static_cast<std::uint8_t>(std::lround(rgba[ch] / static_cast<double>(kept)));
+      out.colors.push_back(c);
+    }
   }
   if (rejected) *rejected = dropped;
   return out;

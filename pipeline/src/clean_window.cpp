@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -25,7 +26,9 @@ double seconds_since(Clock::time_point t) {
 // the same rule as fuse_static_clouds (samples within factor x the median depth, averaged), but
 // the fused depth is converted once (normals from the fused depth, flying pixels found on it)
 // instead of converting every frame. The fused frame carries its points (ray x mean depth) and a
-// confidence image kept / frames (x the frames' mean confidence when they have one).
+// confidence image kept / frames (x the frames' mean confidence when they have one). When every
+// frame has a colour image of the depth's size, the fused pixel's colour is the mean of the
+// colours of the samples kept (per channel, rounded), as fuse_static_clouds does for clouds.
 std::optional<RangeFrame> fuse_depth_frames(const std::vector<RangeFrame>& frames,
                                             const FuseOptions& options, std::size_t* rejected,
                                             std::size_t* samples) {
@@ -38,9 +41,13 @@ std::optional<RangeFrame> fuse_depth_frames(const std::vector<RangeFrame>& frame
         f.depth.data.size() != static_cast<std::size_t>(W) * H ||
         f.depth_unit_m != f0.depth_unit_m || f.K.fx != f0.K.fx || f.K.fy != f0.K.fy ||
         f.K.cx != f0.K.cx || f.K.cy != f0.K.cy || f.K.dist != f0.K.dist ||
-        (f.confidence.has_value() != f0.confidence.has_value()))
-      return std::nullopt;
+        (f.confidence.has_value() != f0.confidence.has_value()) ||
+        f.color.has_value() != f0.color.has_value() ||
+        (f.color && (f.color->width != W || f.color->height != H ||
+                     f.color->data.size() != static_cast<std::size_t>(W) * H)))
+      return std::nullopt;  // fused as clouds (frame_to_points names a wrong colour size)
   const bool conf = f0.confidence.has_value();
+  const bool colors = f0.color.has_value();
   const double nf = static_cast<double>(frames.size());
   RangeFrame out;
   out.index = frames.back().index;
@@ -52,6 +59,7 @@ std::optional<RangeFrame> fuse_depth_frames(const std::vector<RangeFrame>& frame
   const float nan = std::numeric_limits<float>::quiet_NaN();
   out.points = Image<Eigen::Vector3f>(W, H, Eigen::Vector3f(nan, nan, nan));
   out.confidence = Image<float>(W, H, 0.f);
+  if (colors) out.color = Image<std::array<std::uint8_t, 3>>(W, H, {0, 0, 0});
   std::vector<std::size_t> dropped(static_cast<std::size_t>(H), 0), seen(dropped);
   tbb::parallel_for(0, H, [&](int v) {
     std::vector<std::pair<std::uint16_t, std::size_t>> zs;
@@ -70,6 +78,7 @@ std::optional<RangeFrame> fuse_depth_frames(const std::vector<RangeFrame>& frame
       const double med = *mid * f0.depth_unit_m;
       const double band = options.max_depth_deviation_factor * med;
       double sum = 0, csum = 0;
+      std::array<std::uint32_t, 3> rgb{0, 0, 0};
       std::size_t kept = 0;
       for (const auto& [d, k] : zs) {
         const double z = d * f0.depth_unit_m;
@@ -79,6 +88,8 @@ std::optional<RangeFrame> fuse_depth_frames(const std::vector<RangeFrame>& frame
           const float c = frames[k].confidence->data[i];
           csum += std::isfinite(c) ? std::clamp(static_cast<double>(c), 0.0, 1.0) : 0.0;
         }
+        if (colors)
+          for (int ch = 0; ch < 3; ++ch) rgb[ch] += frames[k].color->data[i][ch];
         ++kept;
       }
       dropped[v] += zs.size() - kept;
@@ -90,6 +101,9 @@ std::optional<RangeFrame> fuse_depth_frames(const std::vector<RangeFrame>& frame
           static_cast<std::uint16_t>(std::clamp(std::lround(z / f0.depth_unit_m), 1L, 65535L));
       const double c = conf ? csum / nf : static_cast<double>(kept) / nf;
       out.confidence->data[i] = static_cast<float>(c);
+      if (colors)
+        for (int ch = 0; ch < 3; ++ch)
+          out.color->data[i][ch] = static_cast<std::uint8_t>((rgb[ch] + kept / 2) / kept);
     }
   });
   std::size_t d = 0, n = 0;
@@ -176,6 +190,7 @@ WindowResult clean_window_input(WindowInput&& input, const WindowOptions& option
   }
   const auto t = Clock::now();
   input.cloud.grid = {};  // the filter takes the points as a set
+  if (options.keep_input) r.input = input.cloud;
   FilterResult f = robust_filter(input.cloud, options.filter);
   input.cloud = {};  // the counts stay; the points are no longer needed
   r.seconds_filter = seconds_since(t);

@@ -112,6 +112,10 @@ PointCloud frame_to_points(const RangeFrame& frame, const SourceInfo& info,
                      "confidence image is " +
                          size_text(frame.confidence->width, frame.confidence->height) +
                          ", expected " + size_text(W, H));
+  if (frame.color && (frame.color->width != W || frame.color->height != H))
+    throw InputError(file, where,
+                     "colour image is " + size_text(frame.color->width, frame.color->height) +
+                         ", expected " + size_text(W, H) + " (registered to the depth)");
   if (frame.sensor_normals &&
       (frame.sensor_normals->width != W || frame.sensor_normals->height != H))
     throw InputError(file, where,
@@ -272,6 +276,10 @@ PointCloud frame_to_points(const RangeFrame& frame, const SourceInfo& info,
       cloud.positions.push_back(p);
       cloud.normals.push_back(n.cast<float>());
       cloud.confidences.push_back(static_cast<float>(w));
+      if (frame.color) {
+        const auto& c = frame.color->data[i];
+        cloud.colors.push_back({c[0], c[1], c[2], 255});
+      }
     }
   }
   st.points = cloud.size();

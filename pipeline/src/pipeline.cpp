@@ -61,6 +61,7 @@ WindowOptions window_options(const PipelineOptions& o) {
   w.fuse = o.fuse;
   w.raw = o.raw;
   w.filter = o.filter;
+  w.keep_input = o.keep_input;
   return w;
 }
 
@@ -165,6 +166,7 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
           out.cloud = std::move(j->result.cloud);
           out.outliers = std::move(j->result.outliers);
           out.filter = j->result.filter;
+          out.input = std::move(j->result.input);
           if (on_window) on_window(std::move(out));
           const auto now = Clock::now();
           for (const auto& t : j->arrival)

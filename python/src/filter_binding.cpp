@@ -49,6 +49,7 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["likelihood_ratio"] = o.likelihood_ratio;
   d["displacement_sigma"] = o.displacement_sigma;
   d["outlier_sigma"] = o.outlier_sigma;
+  d["refit_spread"] = o.refit_spread;
   d["remove_small_components"] = o.remove_small_components;
   d["min_component_size"] = o.min_component_size;
   d["use_sensor_normals"] = o.use_sensor_normals;
@@ -133,6 +134,8 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.displacement_sigma = as<double>(v, k);
     else if (k == "outlier_sigma")
       o.outlier_sigma = as<double>(v, k);
+    else if (k == "refit_spread")
+      o.refit_spread = as<double>(v, k);
     else if (k == "remove_small_components")
       o.remove_small_components = as<bool>(v, k);
     else if (k == "min_component_size")
@@ -170,6 +173,7 @@ py::dict stats_to_dict(const FilterStats& s) {
   d["small_components"] = s.small_components;
   d["merged"] = s.merged;
   d["kernels"] = s.kernels;
+  d["kernels_refitted"] = s.kernels_refitted;
   d["h"] = s.h;
   d["h_min"] = s.h_min;
   d["h_max"] = s.h_max;
@@ -234,7 +238,8 @@ named like the fields of scanclean::FilterOptions (see default_filter_options())
 scale= selects scale="fixed" and k_adaptive= selects "adaptive", like the program's --h / --k.
 progress: optional callable(phase: str, fraction: float).
 
-Returns a dict: points, normals, likelihood, iterations, flags, merge_count, source_index (and
+Returns a dict: points, normals, likelihood, iterations, flags, merge_count, source_index,
+displacement (metres moved along the normal; and
 the input's colours, intensities, confidences), "outliers" (the dropped input points with
 flags and source_index) and "stats" (FilterStats as a dict).)doc");
   m.def(

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <ctime>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -122,51 +123,12 @@ Raw16 read_pgm16(const fs::path& file) {
   return r;
 }
 
-//! Width and height from the first IFD of a TIFF (tags 256 and 257), checked before OpenCV
-//! decodes, so that a lying header cannot make it allocate a huge image. Returns nothing when
-//! the structure is not understood (OpenCV then reports the problem).
-std::optional<std::pair<std::uint64_t, std::uint64_t>> tiff_size(
-    const std::vector<unsigned char>& b) {
-  if (b.size() < 8) return std::nullopt;
-  bool le;
-  if (b[0] == 'I' && b[1] == 'I')
-    le = true;
-  else if (b[0] == 'M' && b[1] == 'M')
-    le = false;
-  else
-    return std::nullopt;
-  auto u16 = [&](std::size_t o) -> std::uint32_t {
-    return le ? (b[o] | (b[o + 1] << 8)) : ((b[o] << 8) | b[o + 1]);
-  };
-  auto u32 = [&](std::size_t o) -> std::uint32_t {
-    return le ? (std::uint32_t{b[o]} | (std::uint32_t{b[o + 1]} << 8) |
-                 (std::uint32_t{b[o + 2]} << 16) | (std::uint32_t{b[o + 3]} << 24))
-              : ((std::uint32_t{b[o]} << 24) | (std::uint32_t{b[o + 1]} << 16) |
-                 (std::uint32_t{b[o + 2]} << 8) | std::uint32_t{b[o + 3]});
-  };
-  if (u16(2) != 42) return std::nullopt;  // classic TIFF only (BigTIFF: left to OpenCV)
-  const std::uint64_t ifd = u32(4);
-  if (ifd + 2 > b.size()) return std::nullopt;
-  const std::uint32_t n = u16(ifd);
-  if (ifd + 2 + std::uint64_t{n} * 12 > b.size()) return std::nullopt;
-  std::uint64_t w = 0, h = 0;
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const std::size_t e = ifd + 2 + k * 12;
-    const std::uint32_t tag = u16(e), type = u16(e + 2);
-    if (tag != 256 && tag != 257) continue;
-    const std::uint64_t v = type == 3 ? u16(e + 8) : type == 4 ? u32(e + 8) : 0;
-    (tag == 256 ? w : h) = v;
-  }
-  if (w == 0 || h == 0) return std::nullopt;
-  return std::make_pair(w, h);
-}
-
 Raw16 read_tiff16(const fs::path& file) {
   const std::string name = file.string();
   const std::vector<unsigned char> bytes = detail::read_file_bytes(file, kMaxImageBytes);
   // The size the header declares is checked against the file before OpenCV allocates: the
   // pixels (16 bits each) cannot be compressed better than about 1032:1 (deflate; 1100 allowed).
-  const auto size = tiff_size(bytes);
+  const auto size = detail::tiff_size(bytes);
   if (!size)
     throw InputError(name, "TIFF header",
                      "no image width and height found (not a classic TIFF, or corrupt)");
@@ -351,8 +313,8 @@ std::optional<fs::path> find_sidecar(const fs::path& images) {
   return std::nullopt;
 }
 
-//! Seconds since the epoch from a TUM name ("1305031102.160407") or a PCL grabber name
-//! ("frame_20121214T142255.814212_depth"), in microseconds.
+}  // namespace
+
 std::optional<std::int64_t> timestamp_from_name(const std::string& stem) {
   // TUM: the whole stem is a decimal number of seconds (plausible UNIX time).
   {
@@ -388,6 +350,87 @@ std::optional<std::int64_t> timestamp_from_name(const std::string& stem) {
     return static_cast<std::int64_t>(t) * 1'000'000 + std::stoll(stem.substr(k + 16, 6));
   }
   return std::nullopt;
+}
+
+namespace {
+
+//! The colour image that belongs to a depth image, if there is one: in a depth/ folder, the
+//! file of the same stem in a sibling color/, colour/ or rgb/ folder (Redwood, slambook);
+//! otherwise the file whose name has "color", "colour" or "rgb" where the depth's has "depth"
+//! (Open3D's TUM_depth.png / TUM_color.png, NYU_depth.pgm / NYU_color.ppm).
+std::optional<fs::path> colour_beside(const fs::path& depth) {
+  static const char* const kExt[] = {".png",  ".jpg", ".jpeg", ".ppm",
+                                     ".tiff", ".tif", ".PNG",  ".JPG"};
+  std::error_code ec;
+  const fs::path dir = depth.parent_path();
+  if (lower(dir.filename().string()) == "depth") {
+    for (const char* sub : {"color", "colour", "rgb"})
+      for (const char* e : kExt) {
+        const fs::path c = dir.parent_path() / sub / (depth.stem().string() + e);
+        if (fs::is_regular_file(c, ec)) return c;
+      }
+  }
+  const std::string name = depth.stem().string();
+  const std::string low = lower(name);
+  const auto at = low.find("depth");
+  if (at == std::string::npos) return std::nullopt;
+  for (const char* word : {"color", "colour", "rgb"})
+    for (const char* e : kExt) {
+      const fs::path c = dir / (name.substr(0, at) + word + name.substr(at + 5) + e);
+      if (fs::is_regular_file(c, ec)) return c;
+    }
+  return std::nullopt;
+}
+
+//! TUM RGB-D sequences: depth/<t>.png and rgb/<t'>.png are taken at different instants, so
+//! their names differ. Each depth image gets the colour image of the sibling rgb/ (or color/)
+//! folder nearest to it in time, when that is within 20 ms (the dataset's association rule; its
+//! depth is registered to the colour camera). Empty unless every depth image has one.
+std::vector<fs::path> colour_by_timestamp(const std::vector<fs::path>& depth_files) {
+  constexpr std::int64_t kMaxDifferenceUs = 20'000;
+  if (depth_files.empty()) return {};
+  const fs::path dir = depth_files.front().parent_path();
+  if (lower(dir.filename().string()) != "depth") return {};
+  std::error_code ec;
+  std::vector<std::pair<std::int64_t, fs::path>> colour;  // by time
+  for (const char* sub : {"rgb", "color", "colour"}) {
+    const fs::path cdir = dir.parent_path() / sub;
+    if (!fs::is_directory(cdir, ec)) continue;
+    for (const auto& e : fs::directory_iterator(cdir, ec)) {
+      const std::string ext = lower(e.path().extension().string());
+      if (!e.is_regular_file(ec) ||
+          (ext != ".png" && ext != ".jpg" && ext != ".jpeg" && ext != ".tiff" && ext != ".tif"))
+        continue;
+      if (const auto t = timestamp_from_name(e.path().stem().string()))
+        colour.emplace_back(*t, e.path());
+    }
+    if (!colour.empty()) break;
+  }
+  if (colour.empty()) return {};
+  std::sort(colour.begin(), colour.end());
+  std::vector<fs::path> out;
+  out.reserve(depth_files.size());
+  for (const fs::path& d : depth_files) {
+    if (d.parent_path() != dir) return {};
+    const auto t = timestamp_from_name(d.stem().string());
+    if (!t) return {};
+    auto it = std::lower_bound(colour.begin(), colour.end(), *t,
+                               [](const auto& c, std::int64_t v) { return c.first < v; });
+    std::int64_t best = std::numeric_limits<std::int64_t>::max();
+    const fs::path* nearest = nullptr;
+    const auto consider = [&](const std::pair<std::int64_t, fs::path>& c) {
+      const std::int64_t dt = c.first > *t ? c.first - *t : *t - c.first;
+      if (dt < best) {
+        best = dt;
+        nearest = &c.second;
+      }
+    };
+    if (it != colour.end()) consider(*it);
+    if (it != colour.begin()) consider(*std::prev(it));
+    if (!nearest || best > kMaxDifferenceUs) return {};
+    out.push_back(*nearest);
+  }
+  return out;
 }
 
 class DepthImageSource final : public RangeSource {
@@ -469,11 +512,43 @@ class DepthImageSource final : public RangeSource {
       timestamps_us_.push_back(*t);
     }
 
+    // Colour images beside the depth images: used when every depth image has one of its size.
+    colour_files_.clear();
+    std::string colour_note;
+    for (const fs::path& f : files_) {
+      auto c = colour_beside(f);
+      if (!c) {
+        colour_files_.clear();
+        break;
+      }
+      colour_files_.push_back(*c);
+    }
+    if (colour_files_.empty()) colour_files_ = colour_by_timestamp(files_);
+    std::vector<std::string> warnings;
+    if (!colour_files_.empty()) {
+      const auto rgb = detail::read_rgb_image(colour_files_.front());
+      if (rgb.width != width_ || rgb.height != height_) {
+        warnings.push_back(colour_files_.front().string() + ": colour image is " +
+                           std::to_string(rgb.width) + "x" + std::to_string(rgb.height) +
+                           ", the depth " + std::to_string(width_) + "x" + std::to_string(height_) +
+                           " (not registered); colour not used");
+        colour_files_.clear();
+      } else {
+        colour_note = "; colour from " + colour_files_.front().filename().string() +
+                      (colour_files_.size() > 1 ? " ..." : "");
+        if (encoding_ == Encoding::kNyu)
+          warnings.push_back(colour_files_.front().string() +
+                             ": NYU raw colour is not registered to the depth camera; the "
+                             "points' colours are offset by a few pixels");
+      }
+    }
+
     SourceInfo info;
+    info.warnings = std::move(warnings);
     info.uri = path_.string();
     info.kind = "depth-images";
     info.name = std::string(encoding_name(encoding_)) + ": " + describe() + "; " + why +
-                "; intrinsics from " + k_origin_;
+                "; intrinsics from " + k_origin_ + colour_note;
     info.is_live = false;
     info.frame_count = files_.size();
     info.K = K_;
@@ -513,6 +588,15 @@ class DepthImageSource final : public RangeSource {
       for (std::size_t k = 0; k < src.data.size(); ++k) f.depth.data[k] = nyu_to_mm(src.data[k]);
     } else {
       f.depth = src;
+    }
+    if (!colour_files_.empty()) {
+      auto rgb = detail::read_rgb_image(colour_files_[next_]);
+      if (rgb.width != width_ || rgb.height != height_)
+        throw InputError(colour_files_[next_].string(), "",
+                         "colour image is " + std::to_string(rgb.width) + "x" +
+                             std::to_string(rgb.height) + ", the depth image " +
+                             std::to_string(width_) + "x" + std::to_string(height_));
+      f.color = std::move(rgb);
     }
     frame = std::move(f);
     ++next_;
@@ -605,6 +689,7 @@ class DepthImageSource final : public RangeSource {
   bool pgm_le_auto_ = false;
   int width_ = 0, height_ = 0;
   std::vector<std::int64_t> timestamps_us_;
+  std::vector<fs::path> colour_files_;  //!< per depth image; empty = no colour
   std::optional<Raw16> first_;
   std::size_t next_ = 0;
   SourceInfo info_;

@@ -182,10 +182,14 @@ void write_rgb_png_atomically(const std::filesystem::path& file,
 
 namespace {
 
-// The image size a PNG, JPEG or binary/ASCII PPM/PGM declares, checked against the file's real
-// size before the decoder allocates anything: a Netpbm raster must be in the file; a compressed
-// one cannot expand more than deflate's / JPEG's best ratio (about 1032:1; 1100 allowed). Any
-// other format is refused (the decoder would trust its header).
+// The image size a PNG, JPEG, binary/ASCII PPM/PGM or classic TIFF declares, checked against
+// the file's real size before the decoder allocates anything: a Netpbm raster must be in the
+// file; a compressed one cannot expand more than deflate's / JPEG's best ratio (about 1032:1;
+// 1100 allowed, also for TIFF's PackBits/LZW/deflate). Any other format is refused (the decoder
+// would trust its header). The signatures are checked as strictly as OpenCV's decoders check
+// them (JPEG FF D8 FF, Netpbm magic + whitespace, TIFF II*0 / MM0*): OpenCV picks the first
+// decoder whose signature matches, and one that did not would let another decoder (such as
+// GDCM's, which finds "DICM" at byte 128 and aborts on a malformed file) read the bytes.
 void check_colour_image_size(const std::vector<unsigned char>& b, const std::string& name) {
   const std::uint64_t size = b.size();
   std::uint64_t w = 0, h = 0, raster = 0;  // raster: bytes the pixels need at least
@@ -197,7 +201,7 @@ void check_colour_image_size(const std::vector<unsigned char>& b, const std::str
     w = ph.width;
     h = ph.height;
     raster = w * h * (ph.color_type == 0 || ph.color_type == 3 ? 1 : 3);
-  } else if (size >= 4 && b[0] == 0xFF && b[1] == 0xD8) {
+  } else if (size >= 4 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF) {
     kind = "JPEG";
     std::size_t i = 2;
     while (i + 9 < size) {
@@ -219,8 +223,8 @@ void check_colour_image_size(const std::vector<unsigned char>& b, const std::str
     if (w == 0 || h == 0)
       throw InputError(name, "", "JPEG without a frame header (SOF) giving its size");
     raster = w * h;
-  } else if (size >= 2 && b[0] == 'P' &&
-             (b[1] == '2' || b[1] == '3' || b[1] == '5' || b[1] == '6')) {
+  } else if (size >= 3 && b[0] == 'P' &&
+             (b[1] == '2' || b[1] == '3' || b[1] == '5' || b[1] == '6') && std::isspace(b[2])) {
     kind = "PPM/PGM";
     compressed = false;
     // "P6 <w> <h> <maxval>" with whitespace and # comments; then one whitespace byte.
@@ -259,8 +263,17 @@ void check_colour_image_size(const std::vector<unsigned char>& b, const std::str
                            (channels == 3 ? "colour" : "gray") + " pixels need at least " +
                            std::to_string(raster) + " bytes, but the file has " +
                            std::to_string(size) + " (truncated file or wrong size)");
+  } else if (size >= 4 && ((b[0] == 'I' && b[1] == 'I') || (b[0] == 'M' && b[1] == 'M'))) {
+    kind = "TIFF";
+    const auto wh = tiff_size(b);
+    if (!wh)
+      throw InputError(name, "TIFF header",
+                       "no image width and height found (not a classic TIFF, or corrupt)");
+    w = wh->first;
+    h = wh->second;
+    raster = w * h * 3;
   } else {
-    throw InputError(name, "", "not a PNG, JPEG or PPM/PGM colour image");
+    throw InputError(name, "", "not a PNG, JPEG, PPM/PGM or TIFF colour image");
   }
   if (w == 0 || h == 0 || w * h > kMaxPixels)
     throw InputError(name, kind + " header",
@@ -274,6 +287,42 @@ void check_colour_image_size(const std::vector<unsigned char>& b, const std::str
 }
 
 }  // namespace
+
+std::optional<std::pair<std::uint64_t, std::uint64_t>> tiff_size(
+    const std::vector<unsigned char>& b) {
+  if (b.size() < 8) return std::nullopt;
+  bool le;
+  if (b[0] == 'I' && b[1] == 'I')
+    le = true;
+  else if (b[0] == 'M' && b[1] == 'M')
+    le = false;
+  else
+    return std::nullopt;
+  auto u16 = [&](std::size_t o) -> std::uint32_t {
+    return le ? (b[o] | (b[o + 1] << 8)) : ((b[o] << 8) | b[o + 1]);
+  };
+  auto u32 = [&](std::size_t o) -> std::uint32_t {
+    return le ? (std::uint32_t{b[o]} | (std::uint32_t{b[o + 1]} << 8) |
+                 (std::uint32_t{b[o + 2]} << 16) | (std::uint32_t{b[o + 3]} << 24))
+              : ((std::uint32_t{b[o]} << 24) | (std::uint32_t{b[o + 1]} << 16) |
+                 (std::uint32_t{b[o + 2]} << 8) | std::uint32_t{b[o + 3]});
+  };
+  if (u16(2) != 42) return std::nullopt;  // classic TIFF only (BigTIFF: left to OpenCV)
+  const std::uint64_t ifd = u32(4);
+  if (ifd + 2 > b.size()) return std::nullopt;
+  const std::uint32_t n = u16(ifd);
+  if (ifd + 2 + std::uint64_t{n} * 12 > b.size()) return std::nullopt;
+  std::uint64_t w = 0, h = 0;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const std::size_t e = ifd + 2 + k * 12;
+    const std::uint32_t tag = u16(e), type = u16(e + 2);
+    if (tag != 256 && tag != 257) continue;
+    const std::uint64_t v = type == 3 ? u16(e + 8) : type == 4 ? u32(e + 8) : 0;
+    (tag == 256 ? w : h) = v;
+  }
+  if (w == 0 || h == 0) return std::nullopt;
+  return std::make_pair(w, h);
+}
 
 Image<std::array<std::uint8_t, 3>> read_rgb_image(const std::filesystem::path& file) {
   const std::string name = file.string();

@@ -6,7 +6,9 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "scanclean/core/image.h"
@@ -41,7 +43,14 @@ void write_png16_atomically(const std::filesystem::path& file, const Image<std::
 void write_rgb_png_atomically(const std::filesystem::path& file,
                               const Image<std::array<std::uint8_t, 3>>& rgb);
 
-//! Any 8-bit PNG/JPEG (gray, RGB, RGBA) as RGB, at most 2^26 pixels. \throw InputError.
+//! Width and height from the first IFD of a classic TIFF (tags 256 and 257), read before OpenCV
+//! decodes, so that a lying header cannot make it allocate a huge image; nothing when the
+//! structure is not understood.
+std::optional<std::pair<std::uint64_t, std::uint64_t>> tiff_size(
+    const std::vector<unsigned char>& bytes);
+
+//! Any 8-bit PNG, JPEG, PPM or TIFF (gray, RGB, RGBA) as RGB, at most 2^26 pixels. \throw
+//! InputError.
 Image<std::array<std::uint8_t, 3>> read_rgb_image(const std::filesystem::path& file);
 
 }  // namespace scanclean::detail

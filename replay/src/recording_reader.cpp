@@ -231,6 +231,11 @@ RangeFrame RecordingReader::read_frame(std::size_t i) const {
         c.data[k] = static_cast<float>(q.data[k] / 65535.0);
       frame.confidence = std::move(c);
     }
+    // Colour only where it is registered to the depth (pixel for pixel, the same size).
+    if (!r.color.empty() && s.registration == "depth_to_color") {
+      RgbImage rgb = detail::read_rgb_image(impl_->folder / r.color);
+      if (rgb.width == s.width && rgb.height == s.height) frame.color = std::move(rgb);
+    }
   } catch (const InputError& e) {
     throw InputError(e.what() + row);
   }

@@ -161,6 +161,30 @@ TEST(ScancleanChecksTest, OutOfRangeOptionsAreRefusedNamingTheOptionAsTyped) {
   EXPECT_FALSE(fs::exists(out));
 }
 
+#if defined(SCANCLEAN_HAVE_SL)
+// The structured-light commands share the output checks: a calibration written over the
+// reference it is compared with, or a cloud into a missing folder, is refused before any capture
+// is read (the captures here do not even exist).
+TEST(ScancleanChecksTest, StructuredLightOutputsAreCheckedBeforeWork) {
+  const auto dir = test::make_temp_dir("checks");
+  const fs::path reference = dir / "calib.yml";
+  std::ofstream(reference) << "%YAML:1.0\n";
+  const std::string before = test::slurp(reference);
+  const Outcome same = run({"sl", "calibrate", (dir / "nowhere").string(), "-o", reference.string(),
+                            "--compare", reference.string()},
+                           dir);
+  EXPECT_EQ(same.exit_code, 2) << same.err;
+  EXPECT_TRUE(has(same.err, "-o") && has(same.err, "--compare") && has(same.err, "same file"))
+      << same.err;
+  EXPECT_EQ(test::slurp(reference), before);
+  const Outcome missing =
+      run({"sl", "decode", (dir / "nowhere").string(), "-o", (dir / "no_dir" / "out.ply").string()},
+          dir);
+  EXPECT_EQ(missing.exit_code, 4) << missing.err;
+  EXPECT_TRUE(has(missing.err, "no_dir") && has(missing.err, "does not exist")) << missing.err;
+}
+#endif
+
 TEST(ScancleanChecksTest, IntrinsicsForASourceThatCarriesItsOwnAreRefused) {
   const auto dir = test::make_temp_dir("checks");
   const fs::path oni = test::recordings_dir() / "oni" / "3dj_test.oni";

@@ -1,5 +1,6 @@
 // The filter's options (filter_options.h): the depth-frame preset differs from the defaults in
-// exactly the two tests it turns off, and validate() names the option in its message.
+// exactly the two tests and the refit it turns off, and validate() names the option in its
+// message.
 
 #include "scanclean/filter/filter_options.h"
 
@@ -18,9 +19,12 @@ TEST(FilterOptionsTest, DepthFramePresetTurnsOffTheScaleAndDisplacementTests) {
   EXPECT_EQ(d.displacement_sigma, 0.0);
   EXPECT_GT(base.scale_gamma, 0.0);
   EXPECT_GT(base.displacement_sigma, 0.0);
+  EXPECT_EQ(d.refit_spread, 0.0);
+  EXPECT_EQ(base.refit_spread, 0.0);  // off in the library's defaults as well
   FilterOptions same = d;
   same.scale_gamma = base.scale_gamma;
   same.displacement_sigma = base.displacement_sigma;
+  same.refit_spread = base.refit_spread;
   EXPECT_EQ(same.k_h, base.k_h);
   EXPECT_EQ(same.noise_factor, base.noise_factor);
   EXPECT_EQ(same.outlier_sigma, base.outlier_sigma);

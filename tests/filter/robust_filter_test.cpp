@@ -408,6 +408,49 @@ TEST(RobustFilterTest, SensorNormalsKeepTheSidesOfAThinPlateApart) {
   EXPECT_LT(share_near(without.cloud, 0.0, 0.05 * o.h), 0.05);
 }
 
+TEST(RobustFilterTest, OwnPlaneRefitKeepsSheetsCloserThanHalfHApart) {
+  // A noisy sheet with a second one 0.03 above a fifth of it (x < -0.3), without normals,
+  // automatic h (the refit needs the noise estimate, which the single sheet sets): with the
+  // refit (--refit-spread 1.2) each output point there stays on its own sheet; without it both
+  // collapse onto the middle (the limit the refit removes).
+  constexpr double kGap = 0.03, kSigma = 0.0008;
+  PointCloud c = test::noisy_plane(6000, 1.0, kSigma, 12);  // seed 12
+  PointCloud b = test::noisy_plane(6000, 1.0, kSigma, 13);  // seed 13
+  PointCloud top;
+  for (std::size_t i = 0; i < b.size(); ++i)
+    if (b.positions[i].x() < -0.3)
+      top.positions.push_back(b.positions[i] + Eigen::Vector3d(0, 0, kGap));
+  append(c, top);
+  c.normals.clear();
+  FilterOptions o = no_merge();
+  EXPECT_EQ(o.refit_spread, 0.0);  // off by default (the merged bunny scans' mean and RMS)
+  o.refit_spread = 1.2;
+  const FilterResult with = robust_filter(c, o);
+  // Closer than 0.5 h (the regime where sheets collapsed), farther than the kernels' eigenvalue
+  // floor resolves (3 x 0.05 h).
+  ASSERT_GT(with.stats.h, 2 * kGap);
+  ASSERT_LT(with.stats.h, kGap / 0.15);
+  EXPECT_GT(with.stats.kernels_refitted, 0u);
+  // Share of the output in the two-sheet strip (away from its border) within `tol` of z0.
+  auto strip_share = [](const PointCloud& r, double z0, double tol) {
+    std::size_t in = 0, near = 0;
+    for (const auto& p : r.positions) {
+      if (!(p.x() < -0.35 && p.x() > -0.45 && std::abs(p.y()) < 0.4)) continue;
+      ++in;
+      near += std::abs(p.z() - z0) < tol ? 1 : 0;
+    }
+    return static_cast<double>(near) / static_cast<double>(std::max<std::size_t>(1, in));
+  };
+  EXPECT_GT(strip_share(with.cloud, 0.0, 3 * kSigma), 0.4);
+  EXPECT_GT(strip_share(with.cloud, kGap, 3 * kSigma), 0.4);
+  expect_accounting(c, with);
+  o.refit_spread = 0;
+  const FilterResult without = robust_filter(c, o);
+  EXPECT_EQ(without.stats.kernels_refitted, 0u);
+  EXPECT_LT(strip_share(without.cloud, 0.0, 3 * kSigma), 0.1);
+  EXPECT_LT(strip_share(without.cloud, kGap, 3 * kSigma), 0.1);
+}
+
 TEST(RobustFilterTest, ZeroWeightKernelsContributeNothing) {
   FilterOptions o = no_merge();
   o.scale = ScaleMode::kFixed;
@@ -553,6 +596,8 @@ TEST(RobustFilterTest, ValidateRejectsEachBadOption) {
       {"likelihood_ratio", [](FilterOptions& o) { o.likelihood_ratio = 2; }},
       {"displacement_sigma", [](FilterOptions& o) { o.displacement_sigma = -1; }},
       {"displacement_sigma", [](FilterOptions& o) { o.displacement_sigma = 1e9; }},
+      {"refit_spread", [](FilterOptions& o) { o.refit_spread = -0.5; }},
+      {"refit_spread", [](FilterOptions& o) { o.refit_spread = std::nan(""); }},
       {"threads", [](FilterOptions& o) { o.threads = -1; }},
       {"min_component_size", [](FilterOptions& o) { o.min_component_size = 10000000000ULL; }},
   };

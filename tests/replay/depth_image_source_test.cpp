@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <opencv2/core.hpp>
@@ -88,6 +89,36 @@ TEST(DepthImageSourceTest, TumPngAutoDetectedAt5000PerMetre) {
   EXPECT_EQ(frames[0].K.height, 480);
 }
 
+TEST(DepthImageSourceTest, ColourImagesBesideTheDepthBecomeTheFramesColour) {
+  SCANCLEAN_REQUIRE_SHARED("rgbd_frames/open3d_tum_sample/TUM_color.png");
+  SCANCLEAN_REQUIRE_SHARED("rgbd_frames/redwood_livingroom1_synthetic/color/00000.jpg");
+  // TUM_depth.png + TUM_color.png (same folder), Redwood depth/ + color/ (sibling folders).
+  const fs::path tum = test::shared_data_dir() / "rgbd_frames/open3d_tum_sample";
+  auto src = make_depth_image_source(tum / "TUM_depth.png", with_k(525, 525, 319.5, 239.5));
+  src->open();
+  EXPECT_NE(src->info().name.find("colour from TUM_color.png"), std::string::npos)
+      << src->info().name;
+  const auto frames = read_all(*src);
+  ASSERT_EQ(frames.size(), 1u);
+  ASSERT_TRUE(frames[0].color.has_value());
+  const cv::Mat bgr = cv::imread((tum / "TUM_color.png").string(), cv::IMREAD_COLOR);
+  ASSERT_EQ(frames[0].color->width, bgr.cols);
+  for (const auto& [u, v] : {std::pair{0, 0}, std::pair{320, 240}, std::pair{639, 479}}) {
+    const cv::Vec3b p = bgr.at<cv::Vec3b>(v, u);
+    const auto& c = (*frames[0].color)(u, v);
+    EXPECT_EQ(c[0], p[2]);
+    EXPECT_EQ(c[1], p[1]);
+    EXPECT_EQ(c[2], p[0]);
+  }
+  auto redwood = make_depth_image_source(
+      test::shared_data_dir() / "rgbd_frames/redwood_livingroom1_synthetic", {});
+  redwood->open();
+  RangeFrame f;
+  ASSERT_EQ(redwood->next(f, 0ms), ReadStatus::kOk);
+  ASSERT_TRUE(f.color.has_value());
+  EXPECT_EQ(f.color->width, f.depth.width);
+}
+
 TEST(DepthImageSourceTest, SlambookBigEndianPgmInMillimetres) {
   SCANCLEAN_REQUIRE_SHARED("rgbd_frames/slambook_joinmap/depth/1.pgm");
   // The folder has color/ and depth/; the source finds depth/ and orders 1..5 numerically.
@@ -149,6 +180,23 @@ TEST(DepthImageSourceTest, PclGrabberTiffInMillimetres) {
   EXPECT_EQ(stats(frames[1]).valid, 271395u);
   // Timestamps from the names: 14:22:56.068683 - 14:22:55.814212 = 254471 us.
   EXPECT_EQ(frames[1].device_ts_us - frames[0].device_ts_us, 254471);
+  // The *_rgb.tiff beside each depth image is the frame's colour, pixel for pixel.
+  const cv::Mat bgr = cv::imread(
+      (test::shared_data_dir() / "pcl_grabber_sequence/tiff/frame_20121214T142256.068683_rgb.tiff")
+          .string(),
+      cv::IMREAD_COLOR);
+  ASSERT_FALSE(bgr.empty());
+  ASSERT_TRUE(frames[1].color.has_value());
+  ASSERT_EQ(frames[1].color->width, bgr.cols);
+  ASSERT_EQ(frames[1].color->height, bgr.rows);
+  std::size_t differ = 0;
+  for (int v = 0; v < bgr.rows; v += 7)
+    for (int u = 0; u < bgr.cols; u += 5) {
+      const cv::Vec3b p = bgr.at<cv::Vec3b>(v, u);
+      const std::array<std::uint8_t, 3> rgb{p[2], p[1], p[0]};
+      differ += (*frames[1].color)(u, v) != rgb;
+    }
+  EXPECT_EQ(differ, 0u);
 }
 
 TEST(DepthImageSourceTest, RedwoodUsesOpen3dIntrinsicsSidecar) {
@@ -300,6 +348,47 @@ TEST(DepthImageSourceTest, NaturalOrderAndTumTimestamps) {
   EXPECT_EQ(frames[0].device_ts_us, 1305031102160407LL);
   EXPECT_EQ(frames[1].device_ts_us - frames[0].device_ts_us, 33923);
   EXPECT_EQ(frames[2].device_ts_us - frames[1].device_ts_us, 32408);
+  fs::remove_all(dir);
+}
+
+// A TUM RGB-D sequence: depth/ and rgb/ named by their own timestamps. Each depth image takes
+// the colour image nearest in time (within 20 ms); one farther away means no colour at all.
+TEST(DepthImageSourceTest, TumSequenceColourPairedByTimestamp) {
+  const auto dir = test::make_temp_dir("tum_seq");
+  fs::create_directories(dir / "depth");
+  fs::create_directories(dir / "rgb");
+  const auto v = ramp(8, 6, 20000, 5, 0);
+  const cv::Mat depth(6, 8, CV_16UC1, const_cast<std::uint16_t*>(v.data()));
+  for (const char* n : {"1305031102.160407.png", "1305031102.194330.png"})
+    ASSERT_TRUE(cv::imwrite((dir / "depth" / n).string(), depth));
+  // Colour frames 5 ms before, 8 ms after and 1 s after: blue, green and red (BGR on disk).
+  const std::vector<std::pair<std::string, cv::Scalar>> rgb = {
+      {"1305031102.155001.png", {255, 0, 0}},
+      {"1305031102.202330.png", {0, 255, 0}},
+      {"1305031103.202330.png", {0, 0, 255}}};
+  for (const auto& [n, bgr] : rgb)
+    ASSERT_TRUE(cv::imwrite((dir / "rgb" / n).string(), cv::Mat(6, 8, CV_8UC3, bgr)));
+  {
+    auto src = make_depth_image_source(dir, with_k(500, 500, 4, 3));
+    src->open();
+    EXPECT_NE(src->info().name.find("colour from 1305031102.155001.png"), std::string::npos)
+        << src->info().name;
+    const auto frames = read_all(*src);
+    ASSERT_EQ(frames.size(), 2u);
+    ASSERT_TRUE(frames[0].color.has_value() && frames[1].color.has_value());
+    const std::array<std::uint8_t, 3> blue{0, 0, 255}, green{0, 255, 0};
+    EXPECT_EQ((*frames[0].color)(3, 2), blue);
+    EXPECT_EQ((*frames[1].color)(3, 2), green);
+  }
+  // The second depth image's nearest colour now 30 ms away: no colour for the sequence.
+  fs::remove(dir / "rgb" / "1305031102.202330.png");
+  ASSERT_TRUE(cv::imwrite((dir / "rgb" / "1305031102.224330.png").string(),
+                          cv::Mat(6, 8, CV_8UC3, cv::Scalar(0, 255, 0))));
+  auto src = make_depth_image_source(dir, with_k(500, 500, 4, 3));
+  src->open();
+  const auto frames = read_all(*src);
+  ASSERT_EQ(frames.size(), 2u);
+  EXPECT_FALSE(frames[0].color.has_value());
   fs::remove_all(dir);
 }
 

@@ -145,6 +145,34 @@ TEST(RecordingReaderTest, ColourRoundTripIsExact) {
   fs::remove_all(dir);
 }
 
+TEST(RecordingReaderTest, RegisteredColourBecomesTheFramesColour) {
+  // With registration depth_to_color a colour image of the depth's size is the frame's colour;
+  // without registration (or of another size) the frame has none: the pixels do not correspond.
+  for (const bool registered : {true, false}) {
+    const auto dir = test::make_temp_dir("rec_colour_frame");
+    SessionMetadata s = test::fixture_session();
+    s.registration = registered ? "depth_to_color" : "off";
+    RgbImage rgb(s.width, s.height);
+    for (int v = 0; v < rgb.height; ++v)
+      for (int u = 0; u < rgb.width; ++u)
+        rgb(u, v) = {static_cast<std::uint8_t>(u), static_cast<std::uint8_t>(v), 7};
+    {
+      RecordingWriter w(dir, s, RecordingWriterOptions{false});
+      w.write(test::fixture_frame(s, 0, false), rgb);
+      w.write(test::fixture_frame(s, 1, false), RgbImage(3, 2));  // another size
+      w.finish();
+    }
+    RecordingReader r(dir);
+    const RangeFrame f0 = r.read_frame(0), f1 = r.read_frame(1);
+    EXPECT_EQ(f0.color.has_value(), registered);
+    if (registered) {
+      EXPECT_EQ(f0.color->data, rgb.data);
+    }
+    EXPECT_FALSE(f1.color.has_value());
+    fs::remove_all(dir);
+  }
+}
+
 TEST(RecordingReaderTest, WriterValidatesFrames) {
   const auto dir = test::make_temp_dir("rec_writer_checks");
   const SessionMetadata s = test::fixture_session();

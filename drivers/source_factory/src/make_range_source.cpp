@@ -7,6 +7,7 @@
 
 #include "scanclean/core/errors.h"
 #include "scanclean/replay/depth_image_source.h"
+#include "scanclean/replay/organized_cloud_source.h"
 #include "scanclean/replay/recording_format.h"
 #include "scanclean/replay/replay_source.h"
 #ifdef SCANCLEAN_HAVE_OPENNI2
@@ -59,6 +60,16 @@ bool looks_like_sl(const fs::path& p) {
 #endif
 }
 
+//! A folder with .pcd or .ply files: a sequence of organized clouds.
+bool holds_cloud_files(const fs::path& p) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(p, ec)) {
+    const std::string x = lower(e.path().extension().string());
+    if ((x == ".pcd" || x == ".ply") && e.is_regular_file(ec)) return true;
+  }
+  return false;
+}
+
 std::unique_ptr<RangeSource> sl_source(const fs::path& p, const SourceOptions& o) {
 #ifdef SCANCLEAN_HAVE_SL
   SlOptions so;
@@ -101,7 +112,8 @@ std::vector<std::string> available_source_kinds() {
 std::string accepted_sources_help() {
   std::string s =
       "a recording folder (session.json, frames.csv, depth/*.png), depth images (.png .pgm "
-      ".tif .tiff: a file or a folder; TUM, millimetre or NYU raw)";
+      ".tif .tiff: a file or a folder; TUM, millimetre or NYU raw), organized point clouds (.pcd "
+      ".ply with a grid: a file or a folder, e.g. a PCL grabber sequence)";
 #ifdef SCANCLEAN_HAVE_SL
   s += ", a structured-light capture folder (capture.json or graycode_*.png)";
 #endif
@@ -142,6 +154,7 @@ std::unique_ptr<RangeSource> make_range_source(const std::string& uri_or_path,
       return make_replay_source(
           p, options.recorded_pacing ? Pacing::kRecorded : Pacing::kAsFastAsPossible);
     if (looks_like_sl(p)) return sl_source(p, options);
+    if (holds_cloud_files(p)) return make_organized_cloud_source(p);
     try {
       return depth_images(p, options);
     } catch (const InputError& e) {
@@ -154,6 +167,8 @@ std::unique_ptr<RangeSource> make_range_source(const std::string& uri_or_path,
   if (name == "session.json") return make_range_source(p.parent_path().string(), options);
   if (name == "capture.json") return sl_source(p.parent_path(), options);
   if (is_depth_image_extension(p)) return depth_images(p, options);
+  if (const auto e = lower(p.extension().string()); e == ".pcd" || e == ".ply")
+    return make_organized_cloud_source(p);
   throw InputError(target, "file",
                    "not a known source format (extension \"" + p.extension().string() +
                        "\"); expected " + accepted_sources_help());

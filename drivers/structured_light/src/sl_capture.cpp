@@ -18,6 +18,9 @@ namespace scanclean {
 namespace fs = std::filesystem;
 namespace {
 
+//! A capture description is a few hundred bytes; anything beyond this is not one.
+constexpr std::size_t kMaxCaptureDescriptionBytes = 65536;
+
 int ceil_log2(int v) {
   int bits = 0;
   while ((1 << bits) < v) ++bits;
@@ -74,24 +77,57 @@ T json_get(const nlohmann::json& j, const char* key, const fs::path& file, const
   }
 }
 
+//! An integer item: a JSON integer within int's range (a fraction or 1e10 is refused rather than
+//! cast, which would be undefined behaviour for values out of range).
+int json_int(const nlohmann::json& j, const char* key, const fs::path& file,
+             const std::string& where) {
+  if (!j.contains(key)) throw InputError(file.string(), where + key, "missing (an integer)");
+  const auto& v = j.at(key);
+  if (!v.is_number_integer())
+    throw InputError(file.string(), where + key, "expected an integer, got " + v.dump());
+  if (v.is_number_unsigned()
+          ? v.get<std::uint64_t>() > 2147483647u
+          : (v.get<std::int64_t>() < -2147483647 - 1 || v.get<std::int64_t>() > 2147483647))
+    throw InputError(file.string(), where + key, "integer " + v.dump() + " out of range");
+  return static_cast<int>(v.get<std::int64_t>());
+}
+
 SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
   const fs::path file = folder / "capture.json";
+  // A capture description is a few hundred bytes; refuse anything large before reading it.
+  std::error_code ec;
+  const auto size = fs::file_size(file, ec);
+  if (!ec && size > kMaxCaptureDescriptionBytes)
+    throw InputError(file.string(), "",
+                     "larger than " + std::to_string(kMaxCaptureDescriptionBytes) + " bytes (" +
+                         std::to_string(size) + "): not a capture description");
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw IoError(file.string() + ": cannot open");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw IoError(file.string() + ": read error");
+  SlCaptureInfo info = parse_sl_capture_description(text, file, pw, ph);
+  info.calibration = find_calibration(folder);
+  return info;
+}
+
+}  // namespace
+
+SlCaptureInfo parse_sl_capture_description(std::string_view text, const fs::path& file, int pw,
+                                           int ph) {
+  const fs::path folder = file.parent_path();
+  if (text.size() > kMaxCaptureDescriptionBytes)
+    throw InputError(file.string(), "",
+                     "larger than " + std::to_string(kMaxCaptureDescriptionBytes) +
+                         " bytes: not a capture description");
   nlohmann::json j;
-  {
-    // A capture description is a few hundred bytes; refuse anything large before parsing.
-    std::error_code ec;
-    const auto size = fs::file_size(file, ec);
-    if (!ec && size > 65536)
-      throw InputError(
-          file.string(), "",
-          "larger than 65536 bytes (" + std::to_string(size) + "): not a capture description");
-    std::ifstream in(file);
-    if (!in) throw IoError(file.string() + ": cannot open");
-    try {
-      in >> j;
-    } catch (const nlohmann::json::parse_error& e) {
-      throw InputError(file.string(), byte_place(e.byte), "invalid JSON");
-    }
+  try {
+    j = nlohmann::json::parse(text.begin(), text.end());
+  } catch (const nlohmann::json::parse_error& e) {
+    throw InputError(file.string(), byte_place(e.byte), "invalid JSON");
+  } catch (const nlohmann::json::out_of_range&) {
+    throw InputError(file.string(), "", "a number out of range (expected finite numbers)");
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(file.string(), "", std::string("invalid JSON: ") + e.what());
   }
   if (!j.is_object()) throw InputError(file.string(), "", "expected a JSON object");
   const auto format = json_get<std::string>(j, "format", file, "", "\"scanclean-sl/1\"");
@@ -109,8 +145,8 @@ SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
         "only \"opencv\" (GrayCodePattern::generate order) is supported, got \"" + order + "\"");
   if (!j.contains("projector") || !j["projector"].is_object())
     throw InputError(file.string(), "projector", "missing (object {\"width\", \"height\"})");
-  int width = json_get<int>(j["projector"], "width", file, "projector.", "an integer");
-  int height = json_get<int>(j["projector"], "height", file, "projector.", "an integer");
+  int width = json_int(j["projector"], "width", file, "projector.");
+  int height = json_int(j["projector"], "height", file, "projector.");
   if (pw > 0 && ph > 0) {
     width = pw;
     height = ph;
@@ -123,7 +159,7 @@ SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
   info.folder = folder;
   info.layout = "scanclean";
   info.graycode = graycode_layout(width, height);
-  const int count = json_get<int>(j, "count", file, "", "an integer");
+  const int count = json_int(j, "count", file, "");
   if (count != info.graycode.pattern_count())
     throw InputError(file.string(), "count",
                      std::to_string(count) + " Gray-code images, but a " + std::to_string(width) +
@@ -132,8 +168,8 @@ SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
                          std::to_string(info.graycode.column_bits) + " column + " +
                          std::to_string(info.graycode.row_bits) + " row bits))");
   const int total = count + 2;
-  info.white_index = json_get<int>(j, "white_index", file, "", "an integer");
-  info.black_index = json_get<int>(j, "black_index", file, "", "an integer");
+  info.white_index = json_int(j, "white_index", file, "");
+  info.black_index = json_int(j, "black_index", file, "");
   for (auto [name, v] :
        {std::pair{"white_index", info.white_index}, {"black_index", info.black_index}})
     if (v < 0 || v >= total)
@@ -144,10 +180,8 @@ SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
   if (j.contains("thresholds")) {
     const auto& t = j["thresholds"];
     if (!t.is_object()) throw InputError(file.string(), "thresholds", "expected an object");
-    if (t.contains("white"))
-      info.white_threshold = json_get<int>(t, "white", file, "thresholds.", "an integer");
-    if (t.contains("black"))
-      info.black_threshold = json_get<int>(t, "black", file, "thresholds.", "an integer");
+    if (t.contains("white")) info.white_threshold = json_int(t, "white", file, "thresholds.");
+    if (t.contains("black")) info.black_threshold = json_int(t, "black", file, "thresholds.");
     if (info.white_threshold < 0 || info.black_threshold < 0)
       throw InputError(file.string(), "thresholds", "must be >= 0");
   }
@@ -158,15 +192,19 @@ SlCaptureInfo describe_scanclean(const fs::path& folder, int pw, int ph) {
       image_dir.find("..") != std::string::npos)
     throw InputError(file.string(), "image_dir",
                      "expected a relative folder name inside the capture");
-  if (j.contains("exposure_us"))
+  if (j.contains("exposure_us")) {
     info.exposure_us = json_get<double>(j, "exposure_us", file, "", "a number");
+    if (!(*info.exposure_us >= 0))
+      throw InputError(file.string(), "exposure_us", "expected microseconds >= 0");
+  }
   if (j.contains("camera_serial"))
     info.camera_serial = json_get<std::string>(j, "camera_serial", file, "", "a string");
   const int digits = std::max(3, static_cast<int>(std::to_string(total - 1).size()));
   for (int k = 0; k < total; ++k) info.images.push_back(folder / image_dir / index_name(k, digits));
-  info.calibration = find_calibration(folder);
   return info;
 }
+
+namespace {
 
 SlCaptureInfo describe_kamino(const fs::path& folder, int pw, int ph) {
   SlCaptureInfo info;

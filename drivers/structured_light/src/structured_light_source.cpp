@@ -1,9 +1,12 @@
 #include "scanclean/drivers/structured_light_source.h"
 
+#include <array>
 #include <chrono>
+#include <cstdint>
 #include <map>
 
 #include "scanclean/core/errors.h"
+#include "sl_capture_impl.h"
 
 namespace scanclean {
 namespace fs = std::filesystem;
@@ -88,6 +91,19 @@ SlResult process(const fs::path& folder, const SlOptions& o, TriangulatorCache& 
     r.calibration.projector.height = r.info.graycode.projector_height * step;
   }
   r.frame = cache.get(r.calibration).triangulate(r.decoded, o.triangulation, &r.triangulation);
+  // The white image (the scene under full projector light) is the points' colour, in grey.
+  const cv::Mat& white = capture.impl().images.at(static_cast<std::size_t>(r.info.white_index));
+  if (white.cols == r.frame.width() && white.rows == r.frame.height()) {
+    Image<std::array<std::uint8_t, 3>> grey(white.cols, white.rows);
+    const int shift = white.depth() == CV_16U ? 8 : 0;
+    for (int v = 0; v < white.rows; ++v)
+      for (int u = 0; u < white.cols; ++u) {
+        const auto g = static_cast<std::uint8_t>(shift ? white.at<std::uint16_t>(v, u) >> shift
+                                                       : white.at<std::uint8_t>(v, u));
+        grey(u, v) = {g, g, g};
+      }
+    r.frame.color = std::move(grey);
+  }
   return r;
 }
 
@@ -207,6 +223,10 @@ PointCloud sl_frame_to_cloud(const RangeFrame& frame) {
     cloud.grid.index[i] = static_cast<std::int32_t>(cloud.positions.size());
     cloud.positions.push_back(P.data[i].cast<double>());
     cloud.confidences.push_back(frame.confidence ? frame.confidence->data[i] : 1.0f);
+    if (frame.color) {
+      const auto& c = frame.color->data[i];
+      cloud.colors.push_back({c[0], c[1], c[2], 255});
+    }
   }
   return cloud;
 }

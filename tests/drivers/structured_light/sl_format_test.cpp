@@ -183,6 +183,42 @@ TEST(SlFormatTest, InconsistentCountIsNamed) {
   expect_input_error([&] { describe_sl_capture(folder); }, {"capture.json", "invalid JSON"});
 }
 
+// Numbers JSON can hold but the program cannot: 1e400 (no finite double), integers beyond int,
+// fractions where an integer is expected, negative exposure. Each is named; none reaches a cast.
+TEST(SlFormatTest, OutOfRangeNumbersAreNamed) {
+  const fs::path folder = write_small("sl_range");
+  std::string text;
+  {
+    std::ifstream in(folder / "capture.json");
+    text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const fs::path file = folder / "capture.json";
+  EXPECT_NO_THROW(parse_sl_capture_description(text, file));
+  const auto with = [&](const std::string& key, const std::string& value) {
+    nlohmann::json j = nlohmann::json::parse(text);
+    j[key] = nlohmann::json::parse(value);
+    return j.dump();
+  };
+  std::string t = text;
+  t.insert(t.rfind('}'), ", \"exposure_us\": 1e400");
+  expect_input_error([&] { parse_sl_capture_description(t, file); },
+                     {"capture.json", "out of range", "finite"});
+  expect_input_error([&] { parse_sl_capture_description(with("count", "24.5"), file); },
+                     {"capture.json", "count", "expected an integer", "24.5"});
+  expect_input_error([&] { parse_sl_capture_description(with("count", "1e10"), file); },
+                     {"capture.json", "count", "expected an integer"});
+  expect_input_error([&] { parse_sl_capture_description(with("white_index", "4294967296"), file); },
+                     {"capture.json", "white_index", "out of range"});
+  expect_input_error(
+      [&] { parse_sl_capture_description(with("black_index", "-9223372036854775807"), file); },
+      {"capture.json", "black_index", "out of range"});
+  expect_input_error([&] { parse_sl_capture_description(with("exposure_us", "-5"), file); },
+                     {"capture.json", "exposure_us", ">= 0"});
+  // The folder path reads the same text through the same checks.
+  std::ofstream(file, std::ios::binary | std::ios::trunc) << t;
+  expect_input_error([&] { describe_sl_capture(folder); }, {"capture.json", "out of range"});
+}
+
 TEST(SlFormatTest, OversizedCaptureDescriptionIsRefused) {
   const fs::path folder = write_small("sl_big_json");
   {

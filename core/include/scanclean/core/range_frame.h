@@ -51,6 +51,9 @@ struct RangeFrame {
   std::optional<Image<float>> confidence;
   //! Optional per-pixel sensor normals (unit, facing the sensor; zero = unknown).
   std::optional<Image<Eigen::Vector3f>> sensor_normals;
+  //! Optional per-pixel colour (RGB) registered to the depth pixels (same size); the points
+  //! made from the frame carry it.
+  std::optional<Image<std::array<std::uint8_t, 3>>> color;
 
   int width() const { return points ? points->width : depth.width; }
   int height() const { return points ? points->height : depth.height; }

@@ -78,8 +78,10 @@ struct FilterStats {
   std::size_t removed() const {
     return unsupported + off_surface + low_density + low_likelihood + displaced + small_components;
   }
-  std::size_t merged = 0;       //!< input points merged into another output point
-  std::size_t kernels = 0;      //!< points that got a kernel (>= k_min neighbours)
+  std::size_t merged = 0;   //!< input points merged into another output point
+  std::size_t kernels = 0;  //!< points that got a kernel (>= k_min neighbours)
+  //! Kernels refitted on their own plane (FilterOptions::refit_spread).
+  std::size_t kernels_refitted = 0;
   double h = 0;                 //!< kernel size (metres); kAdaptive: median h_i
   double h_min = 0, h_max = 0;  //!< range of h_i (equal to h unless kAdaptive)
   double h0 = 0;                //!< kAuto: the neighbour-distance median before the noise check
@@ -98,12 +100,15 @@ struct FilterStats {
   int threads = 0;                 //!< worker threads used
 };
 
-//! cloud: the filtered points (positions; normals = oriented surface normals; colours,
-//! intensities and confidences of the representative input point when the input has them;
+//! cloud: the filtered points (positions; normals = oriented surface normals; colours = the mean
+//! of the merged input points'; intensities and confidences of the representative input point
+//! when the input has them;
 //! attributes "likelihood" float32, "iterations" uint8, "flags" uint8, "merge_count" uint32,
-//! "source_index" uint32). outliers: every dropped input point at its input position, with the
-//! input's optional arrays and the attributes "flags" (uint8) and "source_index" (uint32).
-//! Invariant: sum of merge_count over cloud + outliers.size() == input.size().
+//! "source_index" uint32, "displacement" float32: metres from the representative's input point
+//! along the output normal, signed, positive where the point moved along the normal). outliers:
+//! every dropped input point at its input position, with the input's optional arrays and the
+//! attributes "flags" (uint8) and "source_index" (uint32). Invariant: sum of merge_count over cloud
+//! + outliers.size() == input.size().
 struct FilterResult {
   PointCloud cloud;
   PointCloud outliers;

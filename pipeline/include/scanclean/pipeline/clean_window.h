@@ -28,11 +28,14 @@ struct WindowOptions {
   //! Fuse the depth images per pixel (the same rule) and convert the fused depth once, instead
   //! of converting every frame and fusing the clouds: normals and flying pixels come from the
   //! fused depth. Frames with a points image or sensor normals, or of different sizes or
-  //! intrinsics, are fused as clouds.
+  //! intrinsics, are fused as clouds. When every frame carries a colour image of the depth's
+  //! size, a fused pixel's colour is the mean (per channel, rounded) of the colours of the
+  //! samples the fusion kept; frames of which only some carry colour are fused as clouds.
   bool fuse_depth = true;
   FuseOptions fusion;
   bool raw = false;  //!< no filter: the window's points (appended, not fused) are the output
   FilterOptions filter = depth_frame_options();  //!< the depth-frame preset
+  bool keep_input = false;  //!< keep the filter's input in WindowResult::input (previews)
 };
 
 //! \throw OptionError naming the option (points, fusion and, unless raw, filter).
@@ -55,6 +58,7 @@ struct WindowResult {
   PointCloud cloud;     //!< cleaned (or raw) points
   PointCloud outliers;  //!< points the filter removed (empty when raw)
   FilterStats filter;   //!< zero when raw
+  PointCloud input;     //!< the filter's input, only with WindowOptions::keep_input
   double seconds_filter = 0;
 };
 

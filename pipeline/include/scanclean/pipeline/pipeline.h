@@ -62,6 +62,9 @@ struct PipelineOptions {
   //! Whether a window beyond the budget is skipped. kAuto: skip for device sources (SourceInfo
   //! kind "openni2" or "vsensor", which pace themselves), wait for every other (file) source.
   enum class Backlog { kAuto, kSkip, kWait } backlog = Backlog::kAuto;
+  //! Keep each window's points as they went into the filter in WindowOutput::input (e.g. for a
+  //! before/after preview).
+  bool keep_input = false;
   //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
   std::function<bool()> keep_going;
   //! Records every delivered frame (frames before first_frame too), in delivery order, in the
@@ -96,6 +99,7 @@ struct WindowOutput {
   PointCloud cloud;     //!< cleaned (or raw) points
   PointCloud outliers;  //!< points the filter removed (empty when raw)
   FilterStats filter;   //!< zero when raw
+  PointCloud input;     //!< the filter's input, only with PipelineOptions::keep_input
 };
 
 //! A window that was not cleaned because cleaning fell behind (memory budget).

@@ -12,6 +12,7 @@
 //! Intrinsics come from DepthImageOptions::K (the command line) or a sidecar file
 //! `intrinsics.json` beside the images (or in their parent folder); see recordings/README.md.
 
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -42,6 +43,10 @@ void validate(const DepthImageOptions& options);
 //! skipped. A folder without such images but with a "depth" subfolder uses that subfolder.
 //! A file is returned alone. \throw InputError when the path is missing or holds no depth image.
 std::vector<std::filesystem::path> list_depth_images(const std::filesystem::path& file_or_folder);
+
+//! Microseconds since the epoch from a file name's stem: a TUM name ("1305031102.160407",
+//! seconds) or a PCL grabber name ("frame_20121214T142255.814212_depth", UTC); nothing else.
+std::optional<std::int64_t> timestamp_from_name(const std::string& stem);
 
 //! Numeric-aware "natural" order of file names: digit runs compare as numbers.
 bool natural_less(const std::string& a, const std::string& b);

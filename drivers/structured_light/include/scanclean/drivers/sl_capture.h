@@ -22,6 +22,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "scanclean/core/image.h"
@@ -63,6 +64,13 @@ bool is_structured_light_capture(const std::filesystem::path& path);
 //! captures, sorted by name (a session of several captures sharing one calibration).
 std::vector<std::filesystem::path> find_structured_light_captures(
     const std::filesystem::path& path);
+
+//! Parses the text of a capture.json (`file` names it in messages; its folder is the capture
+//! folder). Checks every item (types, integer ranges, the image count against the projector
+//! size, finite numbers) without touching the disk; `calibration` is left empty.
+//! \throw InputError naming the file and the item.
+SlCaptureInfo parse_sl_capture_description(std::string_view text, const std::filesystem::path& file,
+                                           int projector_width = 0, int projector_height = 0);
 
 //! Reads capture.json or detects the kamino410 layout. projector_width/height override (and for
 //! kamino410 supply) the projector size when > 0.

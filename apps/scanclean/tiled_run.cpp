@@ -1,0 +1,197 @@
+// Needs the io and filter modules (as cmd_filter.cpp).
+#if defined(SCANCLEAN_HAVE_IO) && defined(SCANCLEAN_HAVE_FILTER)
+
+#include "scanclean/tiled_run.h"
+
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <optional>
+
+#include "scanclean/core/atomic_file.h"
+#include "scanclean/core/errors.h"
+#include "scanclean/io/ply_stream_writer.h"
+#include "scanclean/io/point_stream.h"
+
+namespace scanclean::app {
+
+std::size_t parse_memory_size(const std::string& option, const std::string& text) {
+  std::size_t used = 0;
+  double v = -1;
+  try {
+    v = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  std::string unit = text.substr(used);
+  if (!unit.empty() && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
+  if (!unit.empty() && (unit.back() == 'i')) unit.pop_back();
+  double scale = 1;
+  if (unit == "K" || unit == "k")
+    scale = 1024.0;
+  else if (unit == "M" || unit == "m")
+    scale = 1024.0 * 1024;
+  else if (unit == "G" || unit == "g")
+    scale = 1024.0 * 1024 * 1024;
+  else if (unit == "T" || unit == "t")
+    scale = 1024.0 * 1024 * 1024 * 1024;
+  else if (!unit.empty())
+    used = 0;
+  if (used == 0 || !(v >= 0) || !std::isfinite(v * scale))
+    throw OptionError(option + ": expected a size such as 2G, 1536M or 800000000 (bytes), got \"" +
+                      text + "\"");
+  return static_cast<std::size_t>(v * scale);
+}
+
+std::size_t default_memory_budget() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  const std::size_t two = std::size_t{2} << 30;
+  if (pages <= 0 || page <= 0) return two;
+  const std::size_t half = static_cast<std::size_t>(pages) * static_cast<std::size_t>(page) / 2;
+  return std::max<std::size_t>(std::size_t{256} << 20, std::min(two, half));
+}
+
+namespace {
+
+// One tile's encoded result in the scratch folder (several processes).
+std::filesystem::path part_file(const std::filesystem::path& scratch, std::size_t tile) {
+  char name[48];
+  std::snprintf(name, sizeof name, "out%06zu.part", tile);
+  return scratch / name;
+}
+
+void put_block(std::ostream& os, std::uint64_t points, const std::string& bytes) {
+  const std::uint64_t size = bytes.size();
+  os.write(reinterpret_cast<const char*>(&points), 8);
+  os.write(reinterpret_cast<const char*>(&size), 8);
+  os.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+std::pair<std::uint64_t, std::string> get_block(std::istream& is, const std::filesystem::path& f) {
+  std::uint64_t points = 0, size = 0;
+  is.read(reinterpret_cast<char*>(&points), 8);
+  is.read(reinterpret_cast<char*>(&size), 8);
+  std::string bytes(size, '\0');
+  is.read(bytes.data(), static_cast<std::streamsize>(size));
+  if (!is) throw IoError(f.string() + ": a tile's result file is incomplete");
+  return {points, std::move(bytes)};
+}
+
+}  // namespace
+
+TiledRunResult run_tiled(const TiledRunRequest& req) {
+  const auto stream = PointStream::open(req.input);
+  TiledRunResult result;
+  result.records = stream->size();
+  TiledSource src;
+  src.records = stream->size();
+  const PointStream* s = stream.get();
+  src.read = [s](std::uint64_t first, std::uint64_t count, PointCloud& out,
+                 std::vector<std::uint64_t>& rec) { s->read(first, count, out, &rec); };
+
+  TiledOptions t = req.tiled;
+  // A private scratch folder beside the output (same disk), removed at the end; with several
+  // processes, named by process 0's pid, which every process learns.
+  bool own_scratch = false;
+  if (t.scratch.empty()) {
+    std::string pid = std::to_string(::getpid());
+    if (req.comm.ranks > 1 && req.comm.allgather) {
+      const std::string all = req.comm.allgather(pid + '\n');
+      pid = all.substr(0, all.find('\n'));
+    }
+    const std::filesystem::path dir = std::filesystem::absolute(req.output).parent_path();
+    t.scratch = dir / (".scanclean-tiles." + pid);
+    own_scratch = true;
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(t.scratch, ec);
+  if (!std::filesystem::is_directory(t.scratch))
+    throw IoError(t.scratch.string() + ": cannot create the scratch folder");
+  struct Cleanup {
+    std::filesystem::path dir;
+    bool on;
+    ~Cleanup() {
+      std::error_code e;
+      if (on) std::filesystem::remove_all(dir, e);
+    }
+  } cleanup{t.scratch, own_scratch && req.comm.rank == 0};
+
+  const bool rank0 = req.comm.rank == 0;
+  const bool many = req.comm.ranks > 1;
+  PlyLayout cloud_layout, outlier_layout;
+  std::unique_ptr<AtomicCommitGroup> group;
+  std::unique_ptr<PlyStreamWriter> out, outl;
+  t.on_globals = [&](const TiledGlobals& g) {
+    const double reach =
+        std::max(g.box.min().cwiseAbs().maxCoeff(), g.box.max().cwiseAbs().maxCoeff());
+    // Float keeps every coordinate within 1e-6 of the diagonal (as write_ply decides).
+    const bool dbl = reach * 6.0e-8 > 1e-6 * g.box.diagonal().norm();
+    cloud_layout.double_positions = outlier_layout.double_positions = dbl;
+    cloud_layout.normals = true;
+    outlier_layout.normals = s->has_normals();
+    cloud_layout.confidences = outlier_layout.confidences = s->has_confidences();
+    cloud_layout.intensities = outlier_layout.intensities = s->has_intensities();
+    cloud_layout.colors = outlier_layout.colors = s->has_colors();
+    cloud_layout.attributes = {
+        {"likelihood", AttributeType::kFloat32},  {"iterations", AttributeType::kUInt8},
+        {"flags", AttributeType::kUInt8},         {"merge_count", AttributeType::kUInt32},
+        {"source_index", AttributeType::kUInt32}, {"displacement", AttributeType::kFloat32}};
+    outlier_layout.attributes = {{"flags", AttributeType::kUInt8},
+                                 {"source_index", AttributeType::kUInt32}};
+    if (rank0) {
+      group = std::make_unique<AtomicCommitGroup>();
+      out = std::make_unique<PlyStreamWriter>(req.output, cloud_layout, req.provenance);
+      if (!req.outliers.empty())
+        outl = std::make_unique<PlyStreamWriter>(req.outliers, outlier_layout, req.provenance);
+    }
+  };
+  const TileSink sink = [&](std::size_t tile, const PointCloud& c, const PointCloud& o) {
+    const std::string cb = encode_ply_vertices(c, cloud_layout);
+    const std::string ob = outl || many ? encode_ply_vertices(o, outlier_layout) : std::string();
+    if (!many) {
+      out->append_encoded(cb, c.size());
+      if (outl) outl->append_encoded(ob, o.size());
+      return;
+    }
+    const auto f = part_file(t.scratch, tile);
+    std::ofstream os(f, std::ios::binary | std::ios::trunc);
+    put_block(os, c.size(), cb);
+    put_block(os, o.size(), req.outliers.empty() ? std::string() : ob);
+    os.close();
+    if (!os) throw IoError(f.string() + ": cannot write a tile's result (disk full?)");
+  };
+  result.stats = tiled_filter(src, req.filter, t, sink, req.comm);
+  // (tiled_filter ends with an exchange between the processes: every part file is complete.)
+  const auto& st = result.stats;
+  const bool collapsed =
+      (st.points_out == 0 && st.points_in >= 1) || (st.points_out == 1 && st.points_in >= 2);
+  if (rank0 && out) {
+    if (many)
+      for (std::size_t k = 0; k < st.tiles; ++k) {
+        const auto f = part_file(t.scratch, k);
+        std::ifstream is(f, std::ios::binary);
+        if (!is) continue;  // a tile without own points
+        auto [n, bytes] = get_block(is, f);
+        out->append_encoded(bytes, n);
+        auto [m, obytes] = get_block(is, f);
+        if (outl) outl->append_encoded(obytes, m);
+        is.close();
+        std::filesystem::remove(f, ec);
+      }
+    if (!collapsed) {
+      out->finish();
+      if (outl) outl->finish();
+      group->commit();
+      result.written = true;
+    }
+  }
+  if (many && req.comm.allgather) req.comm.allgather({});  // outputs committed
+  return result;
+}
+
+}  // namespace scanclean::app
+
+#endif  // SCANCLEAN_HAVE_IO && SCANCLEAN_HAVE_FILTER

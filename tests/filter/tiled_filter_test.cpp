@@ -1,0 +1,165 @@
+// The tiled, out-of-core filter (tiled_filter.h) against the in-memory filter on a cloud split
+// into many tiles.
+#include "scanclean/filter/tiled_filter.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <random>
+
+#include "support/synthetic.h"
+
+namespace scanclean {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A 12 m x 12 m noisy floor with a row of noisy half-spheres on it and uniform clutter above.
+PointCloud scene(std::uint32_t seed) {
+  PointCloud c = test::noisy_plane(40000, 12.0, 0.01, seed);
+  for (int k = 0; k < 4; ++k) {
+    PointCloud s = test::noisy_sphere(3000, 0.8, 0.01, seed + 1 + static_cast<std::uint32_t>(k));
+    for (auto& p : s.positions) p += Eigen::Vector3d(-4.5 + 3.0 * k, 2.0, 0.0);
+    append(c, s);
+  }
+  test::add_uniform_outliers(c, 800, -6.0, 6.0, seed + 9);
+  c.normals.clear();  // raw scanner points: no sensor normals
+  return c;
+}
+
+TiledSource source_of(const PointCloud& c) {
+  TiledSource s;
+  s.records = c.size();
+  s.read = [&c](std::uint64_t first, std::uint64_t count, PointCloud& out,
+                std::vector<std::uint64_t>& rec) {
+    const std::uint64_t end = std::min<std::uint64_t>(c.size(), first + count);
+    std::vector<std::size_t> idx;
+    rec.clear();
+    for (std::uint64_t i = first; i < end; ++i) {
+      idx.push_back(static_cast<std::size_t>(i));
+      rec.push_back(i);
+    }
+    out = select(c, idx);
+  };
+  return s;
+}
+
+struct Tiled {
+  TiledStats stats;
+  PointCloud cloud, outliers;
+  std::size_t sink_calls = 0;
+};
+
+Tiled run_tiled(const PointCloud& c, const FilterOptions& o, std::uint64_t max_tile_points) {
+  const fs::path scratch =
+      fs::temp_directory_path() / ("scanclean_tiled_test_" + std::to_string(::getpid()));
+  fs::create_directories(scratch);
+  TiledOptions t;
+  t.scratch = scratch;
+  t.max_tile_points = max_tile_points;
+  t.chunk_records = 7000;  // many chunks
+  Tiled r;
+  r.stats =
+      tiled_filter(source_of(c), o, t, [&](std::size_t, const PointCloud& a, const PointCloud& b) {
+        append(r.cloud, a);
+        append(r.outliers, b);
+        ++r.sink_calls;
+      });
+  EXPECT_TRUE(fs::is_empty(scratch)) << "scratch files left behind";
+  fs::remove_all(scratch);
+  return r;
+}
+
+std::map<std::uint32_t, std::size_t> by_source(const PointCloud& c) {
+  std::map<std::uint32_t, std::size_t> m;
+  const Attribute* si = c.find_attribute("source_index");
+  for (std::size_t k = 0; si && k < c.size(); ++k) {
+    const auto s = static_cast<std::uint32_t>(si->values[k]);
+    EXPECT_EQ(m.count(s), 0u) << "source " << s << " twice";
+    m[s] = k;
+  }
+  return m;
+}
+
+TEST(TiledFilter, GlobalScaleFromTheFirstPassMatchesTheInMemoryFilter) {
+  const PointCloud c = scene(5);
+  const FilterResult mem = robust_filter(c);
+  const Tiled tiled = run_tiled(c, {}, 14000);
+  std::printf(
+      "in memory %.2f s; tiled: %zu tiles, %llu halo points, largest %llu, h %.4f, "
+      "first pass %.2f s, distribution %.2f s, tiles %.2f s\n",
+      mem.stats.seconds_total, tiled.stats.tiles,
+      static_cast<unsigned long long>(tiled.stats.halo_points),
+      static_cast<unsigned long long>(tiled.stats.tile_points_max), tiled.stats.globals.h,
+      tiled.stats.seconds_globals, tiled.stats.seconds_distribute, tiled.stats.seconds_tiles);
+  // h0 is computed from the same float distances: bit-identical.
+  EXPECT_EQ(tiled.stats.globals.h0, mem.stats.h0);
+  // The noise estimate and the scale test sum the same neighbours in another order.
+  EXPECT_NEAR(tiled.stats.globals.noise_sigma, mem.stats.noise_sigma, 1e-9 * mem.stats.h);
+  EXPECT_NEAR(tiled.stats.globals.h, mem.stats.h, 1e-9 * mem.stats.h);
+  EXPECT_EQ(tiled.stats.globals.kernel_stride, mem.stats.kernel_stride);
+  EXPECT_EQ(tiled.stats.globals.merge_eps, mem.stats.merge_eps);
+}
+
+TEST(TiledFilter, ManyTilesGiveTheInMemoryResultUpToTheStatedDifferences) {
+  const PointCloud c = scene(5);
+  // Kernels at every point, so that the kernel stride's subsample is not one of the
+  // differences; h as the tiled run's first pass chooses it.
+  FilterOptions o;
+  o.kernel_stride = 1;
+  const Tiled tiled = run_tiled(c, o, 14000);
+  EXPECT_GE(tiled.stats.tiles, 8u);
+  EXPECT_EQ(tiled.sink_calls, tiled.stats.tiles);
+  EXPECT_GT(tiled.stats.halo_points, 0u);
+  EXPECT_LE(tiled.stats.tile_points_max, 14000u * 3 / 2);  // histogram cells: an estimate
+  EXPECT_EQ(tiled.stats.points_out, tiled.cloud.size());
+  FilterOptions fixed = o;
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = tiled.stats.globals.h;
+  fixed.merge_eps = tiled.stats.globals.merge_eps;
+  const FilterResult mem = robust_filter(c, fixed);
+
+  const auto a = by_source(mem.cloud), b = by_source(tiled.cloud);
+  const auto ao = by_source(mem.outliers), bo = by_source(tiled.outliers);
+  // Every input point is an output seed, an outlier or merged, once, in both runs.
+  for (const auto& [s, k] : bo) EXPECT_EQ(b.count(s), 0u);
+  std::size_t only_one = 0, flags_differ = 0, moved = 0;
+  double largest = 0;
+  for (const auto& [s, k] : a) {
+    const auto it = b.find(s);
+    if (it == b.end()) {
+      ++only_one;
+      continue;
+    }
+    const double d = (mem.cloud.positions[k] - tiled.cloud.positions[it->second]).norm();
+    largest = std::max(largest, d);
+    moved += d > 0 ? 1 : 0;
+    flags_differ += mem.cloud.find_attribute("flags")->values[k] !=
+                    tiled.cloud.find_attribute("flags")->values[it->second];
+  }
+  for (const auto& [s, k] : b) only_one += a.count(s) ? 0 : 1;
+  std::size_t outlier_diff = 0;
+  for (const auto& [s, k] : ao) outlier_diff += bo.count(s) ? 0 : 1;
+  for (const auto& [s, k] : bo) outlier_diff += ao.count(s) ? 0 : 1;
+  std::printf(
+      "tiles %zu, points out %zu (in memory %zu); seeds in one run only %zu, outliers in one run "
+      "only %zu, flags differ %zu, positions differ %zu, largest difference %.3g h\n",
+      tiled.stats.tiles, tiled.cloud.size(), mem.cloud.size(), only_one, outlier_diff, flags_differ,
+      moved, largest / fixed.h);
+  // The stated reasons (tiled_filter.h) leave summation-order differences far below the noise,
+  // and a handful of border and threshold decisions.
+  const double n = static_cast<double>(c.size());
+  // (Measured: 0 seeds, 0 outliers and 0 flags differ; positions by at most 1e-5 h.)
+  EXPECT_LE(static_cast<double>(only_one), 1e-3 * n);
+  EXPECT_LE(static_cast<double>(outlier_diff), 1e-3 * n);
+  EXPECT_LE(static_cast<double>(flags_differ), 1e-3 * n);
+  EXPECT_LT(largest, 1e-3 * fixed.h);
+}
+
+}  // namespace
+}  // namespace scanclean
