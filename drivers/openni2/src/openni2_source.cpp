@@ -144,6 +144,16 @@ class FrameListener final : public openni::VideoStream::NewFrameListener {
     vfov_ = vfov;
   }
   void onNewFrame(openni::VideoStream& stream) override {
+    // Read only when a frame is waiting. OpenNI2 signals new frames with an auto-reset event,
+    // so the signals of frames that arrive while this callback runs collapse into one, and the
+    // stream holds only its newest frame: a call can come for a frame the previous call has
+    // already read. readFrame() would then wait without a timeout for the next frame, which at
+    // the end of a stream never comes, and it waits inside OpenNI2's event dispatch, holding
+    // the lock that removeNewFrameListener() takes: close() hung for ever (seen under load in
+    // LivePipelineTest). waitForAnyStream with timeout 0 only looks at the stream.
+    openni::VideoStream* streams[] = {&stream};
+    int ready = -1;
+    if (openni::OpenNI::waitForAnyStream(streams, 1, &ready, 0) != openni::STATUS_OK) return;
     openni::VideoFrameRef ref;
     HeldFrame held;
     if (stream.readFrame(&ref) != openni::STATUS_OK || !ref.isValid()) {
