@@ -6,8 +6,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <thread>
 
@@ -404,6 +406,35 @@ TEST(OpenNI2SourceTest, KilledOniRecordingIsReadableUpToItsLastFrame) {
   std::printf("killed .oni: %llu bytes, %zu frames played back (%s)\n",
               static_cast<unsigned long long>(std::filesystem::file_size(oni)), frames,
               src->last_error().c_str());
+}
+
+// A real-time device at 1000 fps drained to its end, then closed, 10 times. OpenNI2's new-frame
+// signals collapse when frames come faster than its listener thread runs, so the listener can be
+// called once more for a frame it has already read; it used to wait inside OpenNI2 for a frame
+// that never came, and close() waited for it for ever. That needs a preemption in a short window
+// (seen about once in 20 live-pipeline runs on a loaded machine), so this test does not reproduce
+// it reliably; it checks that such streams end and close, and a watchdog ends the process after
+// 60 s instead of letting a hang go unnoticed.
+TEST(OpenNI2SourceTest, FastRealtimeStreamClosesAfterItsEnd) {
+  std::atomic<bool> done{false};
+  std::thread watchdog([&done] {
+    for (int i = 0; i < 600 && !done; ++i) std::this_thread::sleep_for(100ms);
+    if (done) return;
+    std::fprintf(stderr, "FastRealtimeStreamClosesAfterItsEnd: close() hangs; aborting\n");
+    std::_Exit(1);
+  });
+  std::uint64_t frames = 0;
+  for (int cycle = 0; cycle < 10; ++cycle) {
+    auto src = open_source("vsensor://pattern?w=32&h=24&n=60&fps=1000&pace=realtime");
+    RangeFrame f;
+    ReadStatus s;
+    while ((s = src->next(f, 100ms)) == ReadStatus::kOk) ++frames;
+    EXPECT_EQ(s, ReadStatus::kEndOfStream) << "cycle " << cycle << ": " << src->last_error();
+    src->close();
+  }
+  done = true;
+  watchdog.join();
+  EXPECT_GT(frames, 0u);
 }
 
 TEST(OpenNI2SourceTest, RepeatedOpenCloseCycles) {
