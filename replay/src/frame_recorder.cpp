@@ -22,12 +22,19 @@ void FrameRecorder::write(const SourceInfo& info, const RangeFrame& frame) {
                     options_);
   if (last_recorded_ && frame.index + offset_ <= *last_recorded_)
     offset_ = *last_recorded_ + 1 - frame.index;  // the source restarted its indices
+  // The colour image, when the frame has one, is recorded beside the depth (color/).
+  auto put = [this](const RangeFrame& f) {
+    if (f.color)
+      writer_->write(f, *f.color);
+    else
+      writer_->write(f);
+  };
   if (offset_ == 0) {
-    writer_->write(frame);
+    put(frame);
   } else {
     RangeFrame shifted = frame;
     shifted.index += offset_;
-    writer_->write(shifted);
+    put(shifted);
   }
   last_recorded_ = frame.index + offset_;
   ++written_;

@@ -25,7 +25,8 @@ class FrameRecorder {
 
   //! Appends `frame`; the first frame creates the recording (session_from_info(info, its depth
   //! size)). A source that restarted its indices (a reconnect) is shifted so that the recorded
-  //! index keeps increasing. \throw as RecordingWriter (IoError, InputError).
+  //! index keeps increasing. The frame's colour image, if any, is recorded too.
+  //! \throw as RecordingWriter (IoError, InputError).
   void write(const SourceInfo& info, const RangeFrame& frame);
   //! session.json "finalized": true. Idempotent. \throw IoError.
   void finish();
