@@ -54,6 +54,19 @@ void check_input_files(const std::string& command, const std::vector<PathArg>& i
   }
 }
 
+void check_output_location(const std::string& command, const PathArg& out) {
+  std::error_code ec;
+  if (fs::is_directory(out.path, ec))
+    throw OptionError(command + ": " + named(out) + ": is a folder; expected a file name");
+  const fs::path folder = out.path.parent_path().empty() ? fs::path(".") : out.path.parent_path();
+  if (!fs::is_directory(folder, ec))
+    throw IoError(command + ": " + named(out) + ": the folder \"" + folder.string() +
+                  "\" does not exist (create it first)");
+  if (::access(folder.c_str(), W_OK | X_OK) != 0)
+    throw IoError(command + ": " + named(out) + ": cannot write in the folder \"" +
+                  folder.string() + "\": " + std::strerror(errno));
+}
+
 void check_output_files(const std::string& command, const std::vector<PathArg>& inputs,
                         const std::vector<PathArg>& outputs, bool point_cloud) {
   for (std::size_t i = 0; i < outputs.size(); ++i) {
@@ -61,16 +74,7 @@ void check_output_files(const std::string& command, const std::vector<PathArg>& 
     if (out.path.empty()) continue;
     if (point_cloud && !has_point_cloud_extension(out.path))
       throw OptionError(command + ": " + named(out) + ": must end in .ply, .pcd, .xyz or .txt");
-    std::error_code ec;
-    if (fs::is_directory(out.path, ec))
-      throw OptionError(command + ": " + named(out) + ": is a folder; expected a file name");
-    const fs::path folder = out.path.parent_path().empty() ? fs::path(".") : out.path.parent_path();
-    if (!fs::is_directory(folder, ec))
-      throw IoError(command + ": " + named(out) + ": the folder \"" + folder.string() +
-                    "\" does not exist (create it first)");
-    if (::access(folder.c_str(), W_OK | X_OK) != 0)
-      throw IoError(command + ": " + named(out) + ": cannot write in the folder \"" +
-                    folder.string() + "\": " + std::strerror(errno));
+    check_output_location(command, out);
     for (const auto& in : inputs)
       if (!in.path.empty() && same_file(out.path, in.path))
         throw OptionError(command + ": " + named(out) + " is the same file as the " + named(in) +

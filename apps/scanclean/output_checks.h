@@ -20,6 +20,10 @@ struct PathArg {
 //! Input files: each must exist and be a regular file (a folder is reported as a folder).
 void check_input_files(const std::string& command, const std::vector<PathArg>& inputs);
 
+//! One output's place: the path is not a folder, its folder exists and is writable. Messages
+//! start with `command: option "path"`. \throw OptionError (a folder) or IoError (the folder).
+void check_output_location(const std::string& command, const PathArg& output);
+
 //! Output files: the folder exists and is writable, the path is not a folder, and no output is
 //! the same file as an input or as another output. With `point_cloud`, the extension must be one
 //! write_point_cloud() knows (.ply .pcd .xyz .txt). Empty paths are skipped.

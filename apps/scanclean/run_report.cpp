@@ -1,14 +1,11 @@
 #include "scanclean/run_report.h"
 
 #include <openssl/evp.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <chrono>
 #include <cstdio>
-#include <cstring>
 #include <ctime>
 #include <fstream>
 #include <memory>
@@ -155,17 +152,9 @@ void begin_report(CLI::App& app, int argc, char** argv) {
   std::string command;
   for (const CLI::App* a = leaf; a != nullptr && a->get_parent() != nullptr; a = a->get_parent())
     command = a->get_name() + (command.empty() ? "" : " " + command);
-  const std::string who = command + ": --report \"" + path.string() + "\"";
-  if (lower(path.extension().string()) != ".json") throw OptionError(who + ": must end in .json");
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) throw OptionError(who + ": is a folder; expected a file name");
-  const fs::path folder = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-  if (!fs::is_directory(folder, ec))
-    throw IoError(who + ": the folder \"" + folder.string() +
-                  "\" does not exist (create it first)");
-  if (::access(folder.c_str(), W_OK | X_OK) != 0)
-    throw IoError(who + ": cannot write in the folder \"" + folder.string() +
-                  "\": " + std::strerror(errno));
+  if (lower(path.extension().string()) != ".json")
+    throw OptionError(command + ": --report \"" + path.string() + "\": must end in .json");
+  check_output_location(command, PathArg{"--report", path});
 
   auto s = std::make_unique<ReportState>();
   s->path = path;
