@@ -81,24 +81,35 @@ template <class V, class VI>
       dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
 }
 
-template <class V, class VI>
+// kReuse: e_j (slab-masked) and d_j are already in the buffer, from min_mahalanobis at the same
+// x; only the truncation mask is applied (the same values as computing them again).
+template <class V, class VI, bool kReuse>
 [[gnu::always_inline]] inline bool step_impl(CandidateBuffer& b, const float x[3],
                                              const float nref[3], float t2, StepSums& out) {
   constexpr int W = sizeof(V) / sizeof(float);
   const float inf = std::numeric_limits<float>::infinity();
-  const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
   V vmin = V{} + inf;
   const std::size_t n = b.padded;
   float* e_out = b.f[CandidateBuffer::kE].data();
   float* d_out = b.d.data();
-  for (std::size_t j = 0; j < n; j += W) {
-    V e, d;
-    e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
-    const VI keep = (e < t2) & (d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]));
-    const V em = keep ? e : V{} + inf;
-    vmin = em < vmin ? em : vmin;
-    std::memcpy(e_out + j, &em, sizeof(V));
-    std::memcpy(d_out + j, &d, sizeof(V));
+  if constexpr (kReuse) {
+    for (std::size_t j = 0; j < n; j += W) {
+      const V e = load<V, VI>(e_out + j);
+      const V em = e < t2 ? e : V{} + inf;
+      vmin = em < vmin ? em : vmin;
+      std::memcpy(e_out + j, &em, sizeof(V));
+    }
+  } else {
+    const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
+    for (std::size_t j = 0; j < n; j += W) {
+      V e, d;
+      e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
+      const VI keep = (e < t2) & (d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]));
+      const V em = keep ? e : V{} + inf;
+      vmin = em < vmin ? em : vmin;
+      std::memcpy(e_out + j, &em, sizeof(V));
+      std::memcpy(d_out + j, &d, sizeof(V));
+    }
   }
   float emin = inf;
   for (int l = 0; l < W; ++l) emin = std::min(emin, vmin[l]);
@@ -147,6 +158,7 @@ template <class V, class VI>
   const float inf = std::numeric_limits<float>::infinity();
   const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
   float* e_out = b.f[CandidateBuffer::kE].data();
+  float* d_out = b.d.data();
   V vmin = V{} + inf;
   for (std::size_t j = 0; j < b.padded; j += W) {
     V e, d;
@@ -154,6 +166,7 @@ template <class V, class VI>
     const VI keep = d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]);
     const V em = keep ? e : V{} + inf;
     std::memcpy(e_out + j, &em, sizeof(V));
+    std::memcpy(d_out + j, &d, sizeof(V));
     vmin = em < vmin ? em : vmin;
   }
   float emin = inf;
@@ -189,7 +202,11 @@ typedef int VI8 __attribute__((vector_size(32)));
 
 [[gnu::target("avx2,fma")]] bool step_avx2(CandidateBuffer& b, const float x[3],
                                            const float nref[3], float t2, StepSums& out) {
-  return step_impl<V8, VI8>(b, x, nref, t2, out);
+  return step_impl<V8, VI8, false>(b, x, nref, t2, out);
+}
+[[gnu::target("avx2,fma")]] bool step_reuse_avx2(CandidateBuffer& b, const float nref[3], float t2,
+                                                 StepSums& out) {
+  return step_impl<V8, VI8, true>(b, nullptr, nref, t2, out);
 }
 [[gnu::target("avx2,fma")]] double likelihood_avx2(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V8, VI8>(b, x, t2);
@@ -201,7 +218,10 @@ float min_e_sse(CandidateBuffer& b, const float x[3]) {
   return min_e_impl<V4, VI4>(b, x);
 }
 bool step_sse(CandidateBuffer& b, const float x[3], const float nref[3], float t2, StepSums& out) {
-  return step_impl<V4, VI4>(b, x, nref, t2, out);
+  return step_impl<V4, VI4, false>(b, x, nref, t2, out);
+}
+bool step_reuse_sse(CandidateBuffer& b, const float nref[3], float t2, StepSums& out) {
+  return step_impl<V4, VI4, true>(b, nullptr, nref, t2, out);
 }
 double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V4, VI4>(b, x, t2);
@@ -261,6 +281,12 @@ bool have_avx2() {
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out) {
   return have_avx2() ? step_avx2(buffer, x, nref, t2, out) : step_sse(buffer, x, nref, t2, out);
+}
+
+bool step_sums_after_min_mahalanobis(CandidateBuffer& buffer, const float nref[3], float t2,
+                                     StepSums& out) {
+  return have_avx2() ? step_reuse_avx2(buffer, nref, t2, out)
+                     : step_reuse_sse(buffer, nref, t2, out);
 }
 
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]) {

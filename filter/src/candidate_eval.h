@@ -89,8 +89,13 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
 //! s_j n_j with s_j = sign(n_j . nref).
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out);
+//! step_sums at the x of the min_mahalanobis call just before (no other call in between):
+//! takes e_j and d_j from the buffer instead of computing them again; the same results, bit
+//! for bit.
+bool step_sums_after_min_mahalanobis(CandidateBuffer& buffer, const float nref[3], float t2,
+                                     StepSums& out);
 //! min e_j at x over the candidates that pass the slab test (d_j^2 < slab2_j); +inf if there is
-//! none. Fills buffer.f[kE] with e_j (+inf where the slab test fails).
+//! none. Fills buffer.f[kE] with e_j (+inf where the slab test fails) and buffer.d with d_j.
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);

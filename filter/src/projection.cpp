@@ -69,6 +69,8 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
   gather(ctx, of, h, buf);
+  // The first step reuses the e_j and d_j of the off-surface test, at the same position.
+  bool first_step_ready = false;
   if (ctx.off_surface.threshold2 > 0 && buf.count > 0) {
     // Only points the kernels support at all (as the first iteration will check); the others
     // are left to be flagged unsupported.
@@ -80,6 +82,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       out.normal = nref;
       return out;
     }
+    first_step_ready = true;
   }
   // x relative to the candidates' origin, in float; the candidates are gathered again around x
   // once it has moved by more than a quarter of h from where they were gathered.
@@ -88,6 +91,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       of = x.cast<float>();
       origin = of.cast<double>();
       gather(ctx, of, h, buf);
+      first_step_ready = false;
     }
     const Eigen::Vector3d xl = x - origin;
     for (int a = 0; a < 3; ++a) xf[a] = static_cast<float>(xl[a]);
@@ -102,7 +106,11 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     float xf[3];
     local_position(xf);
     StepSums s;
-    if (!step_sums(buf, xf, nref.data(), ctx.t2, s)) {
+    const bool kept = first_step_ready
+                          ? step_sums_after_min_mahalanobis(buf, nref.data(), ctx.t2, s)
+                          : step_sums(buf, xf, nref.data(), ctx.t2, s);
+    first_step_ready = false;
+    if (!kept) {
       out.state = ProjectionState::kUnsupported;
       out.iterations = static_cast<std::uint8_t>(iters);
       out.normal = nref;

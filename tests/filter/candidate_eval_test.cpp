@@ -119,6 +119,40 @@ TEST(CandidateEvalTest, VectorisedLoopsMatchTheScalarReference) {
   }
 }
 
+TEST(CandidateEvalTest, StepAfterMinMahalanobisEqualsAFreshStepBitForBit) {
+  const float t2 = 9, slab2 = 1;
+  int kept_trials = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const int n = 1 + trial * 7;
+    const std::vector<KernelRecord> k = random_kernels(n, 300 + trial);
+    std::vector<std::uint32_t> slots(n);
+    for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
+    const float origin[3] = {0.002f, 0.001f, -0.0005f};
+    CandidateBuffer buf;
+    buf.clear();
+    append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
+    buf.finish();
+    // Points at and off the kernels, some beyond the truncation of every one.
+    const float xf[3] = {0.0004f * static_cast<float>(trial % 5), -0.0007f,
+                         0.002f * static_cast<float>(trial % 4)};
+    const float nref[3] = {0, 0.6f, 0.8f};
+    StepSums fresh, reused;
+    const bool kept_fresh = step_sums(buf, xf, nref, t2, fresh);
+    min_mahalanobis(buf, xf);
+    const bool kept_reused = step_sums_after_min_mahalanobis(buf, nref, t2, reused);
+    ASSERT_EQ(kept_fresh, kept_reused) << "trial " << trial;
+    if (!kept_fresh) continue;
+    ++kept_trials;
+    EXPECT_EQ(fresh.e_min, reused.e_min) << "trial " << trial;
+    EXPECT_EQ(fresh.s, reused.s) << "trial " << trial;
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_EQ(fresh.dn[a], reused.dn[a]) << "trial " << trial << " axis " << a;
+      EXPECT_EQ(fresh.n[a], reused.n[a]) << "trial " << trial << " axis " << a;
+    }
+  }
+  EXPECT_GT(kept_trials, 5);  // the comparison was made, not skipped
+}
+
 TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {
   const std::vector<KernelRecord> k = random_kernels(37, 7);
   std::vector<std::uint32_t> slots;
