@@ -271,6 +271,41 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
+// AVX2 without FMA: the squared distances are rounded as in the scalar loop.
+[[gnu::target("avx2")]] std::size_t select_avx2(const float* x, const float* y, const float* z,
+                                                const std::uint32_t* slots, std::size_t n,
+                                                const float origin[3], float r2,
+                                                std::uint32_t* out) {
+  const __m256 ox = _mm256_set1_ps(origin[0]), oy = _mm256_set1_ps(origin[1]),
+               oz = _mm256_set1_ps(origin[2]), rr = _mm256_set1_ps(r2);
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; j += 8) {
+    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), ox);
+    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), oy);
+    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), oz);
+    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                    _mm256_mul_ps(dz, dz));
+    unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ)));
+    while (mask != 0) {
+      out[m++] = slots[j + static_cast<std::size_t>(__builtin_ctz(mask))];
+      mask &= mask - 1;
+    }
+  }
+  return m;
+}
+
+std::size_t select_scalar(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out) {
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; ++j) {
+    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+    out[m] = slots[j];
+    m += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
+  }
+  return m;
+}
+
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
   return yes;
@@ -306,6 +341,13 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
     for (std::size_t k = 0; k < n; ++k)
       buffer.push_record(slots[k], records[slots[k]], origin, slab2);
   }
+}
+
+std::size_t select_within(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out) {
+  return have_avx2() ? select_avx2(x, y, z, slots, n, origin, r2, out)
+                     : select_scalar(x, y, z, slots, n, origin, r2, out);
 }
 
 float fast_exp(float a) {

@@ -153,6 +153,44 @@ TEST(CandidateEvalTest, StepAfterMinMahalanobisEqualsAFreshStepBitForBit) {
   EXPECT_GT(kept_trials, 5);  // the comparison was made, not skipped
 }
 
+TEST(CandidateEvalTest, SelectWithinEqualsTheScalarDistanceTest) {
+  // Points around a sphere of radius r (many within a few ulps of it), padded with +inf.
+  std::mt19937 rng(21);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u(0.999f, 1.001f);
+  const float origin[3] = {0.31f, -0.12f, 0.05f};
+  const float r = 0.0125f, r2 = r * r;
+  std::vector<float> x, y, z;
+  std::vector<std::uint32_t> slots;
+  for (int j = 0; j < 203; ++j) {
+    Eigen::Vector3f v(g(rng), g(rng), g(rng));
+    v *= r * u(rng) / v.norm();
+    x.push_back(origin[0] + v.x());
+    y.push_back(origin[1] + v.y());
+    z.push_back(origin[2] + v.z());
+    slots.push_back(static_cast<std::uint32_t>(1000 + 3 * j));
+  }
+  std::vector<std::uint32_t> expected;
+  for (std::size_t j = 0; j < x.size(); ++j) {
+    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+    const float d2 = dx * dx + dy * dy;
+    if (d2 + dz * dz < r2) expected.push_back(slots[j]);
+  }
+  while (x.size() % 8 != 0) {
+    x.push_back(std::numeric_limits<float>::infinity());
+    y.push_back(std::numeric_limits<float>::infinity());
+    z.push_back(std::numeric_limits<float>::infinity());
+    slots.push_back(7);
+  }
+  std::vector<std::uint32_t> out(x.size());
+  const std::size_t n =
+      select_within(x.data(), y.data(), z.data(), slots.data(), x.size(), origin, r2, out.data());
+  out.resize(n);
+  EXPECT_EQ(out, expected);
+  EXPECT_GT(expected.size(), 50u);  // both sides of the sphere are present
+  EXPECT_LT(expected.size(), 150u);
+}
+
 TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {
   const std::vector<KernelRecord> k = random_kernels(37, 7);
   std::vector<std::uint32_t> slots;
