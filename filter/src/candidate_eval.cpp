@@ -271,6 +271,19 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
+// For each 8-bit mask, the indices of its set bits in increasing order (then zeros).
+struct PackTable {
+  std::int32_t lane[256][8];
+  constexpr PackTable() : lane{} {
+    for (int m = 0; m < 256; ++m) {
+      int k = 0;
+      for (int b = 0; b < 8; ++b)
+        if (m & (1 << b)) lane[m][k++] = b;
+    }
+  }
+};
+constexpr PackTable kPack;
+
 // AVX2 without FMA: the squared distances are rounded as in the scalar loop.
 [[gnu::target("avx2")]] std::size_t select_avx2(const float* x, const float* y, const float* z,
                                                 const std::uint32_t* slots, std::size_t n,
@@ -285,11 +298,14 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
     const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), oz);
     const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
                                     _mm256_mul_ps(dz, dz));
-    unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ)));
-    while (mask != 0) {
-      out[m++] = slots[j + static_cast<std::size_t>(__builtin_ctz(mask))];
-      mask &= mask - 1;
-    }
+    const unsigned mask =
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ)));
+    // Left-pack the selected lanes' slots: all 8 are stored at m <= j (so within n), the count
+    // advances by the selected.
+    const __m256i s = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots + j));
+    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kPack.lane[mask]));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + m), _mm256_permutevar8x32_epi32(s, perm));
+    m += static_cast<std::size_t>(__builtin_popcount(mask));
   }
   return m;
 }

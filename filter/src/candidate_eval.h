@@ -102,7 +102,7 @@ double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
 //! Writes to out, in order, the slots[j] of the points (x[j], y[j], z[j]), j < n, whose
 //! squared distance to origin, (dx dx + dy dy) + dz dz in float without fused multiply-add (as
 //! a plain scalar loop computes it), is below r2; returns their count. n a multiple of 8
-//! (pad with +inf coordinates); out holds n entries.
+//! (pad with +inf coordinates); out holds n entries (past the count it is scratch).
 std::size_t select_within(const float* x, const float* y, const float* z,
                           const std::uint32_t* slots, std::size_t n, const float origin[3],
                           float r2, std::uint32_t* out);

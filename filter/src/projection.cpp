@@ -32,7 +32,16 @@ struct CellCentres {
   std::uint64_t run = 0;
   std::int64_t cell = -1;
   std::vector<float> x, y, z;
-  std::vector<std::uint32_t> slot, hit;
+  std::vector<std::uint32_t> slot;
+};
+
+// The last few cells' centres of one thread: the points of one cell of the point grid are in
+// no particular order and fall into several cells of the (coarser) kernel grid.
+struct CellCache {
+  static constexpr std::size_t kEntries = 8;
+  CellCentres entry[kEntries];
+  std::size_t next = 0;  // round-robin replacement
+  std::vector<std::uint32_t> hit;
 };
 
 std::atomic<std::uint64_t> next_run{1};
@@ -45,8 +54,14 @@ bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float 
   const NeighborIndex& index = *ctx.ks->index;
   const std::int64_t c = index.adjacent_cell(of, r);
   if (c < 0) return false;
-  thread_local CellCentres cc;
-  if (cc.run != ctx.run || cc.cell != c) {
+  thread_local CellCache cache;
+  CellCentres* found = nullptr;
+  for (CellCentres& e : cache.entry)
+    if (e.cell == c && e.run == ctx.run) found = &e;
+  if (found == nullptr) {
+    found = &cache.entry[cache.next];
+    cache.next = (cache.next + 1) % CellCache::kEntries;
+    CellCentres& cc = *found;
     cc.run = ctx.run;
     cc.cell = c;
     cc.x.clear();
@@ -69,13 +84,14 @@ bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float 
       cc.z.push_back(inf);
       cc.slot.push_back(0);
     }
-    cc.hit.resize(cc.x.size());
   }
+  const CellCentres& cc = *found;
+  cache.hit.resize(cc.x.size());
   const float origin[3] = {of.x(), of.y(), of.z()};
   const std::size_t n = select_within(cc.x.data(), cc.y.data(), cc.z.data(), cc.slot.data(),
-                                      cc.x.size(), origin, r * r, cc.hit.data());
+                                      cc.x.size(), origin, r * r, cache.hit.data());
   buf.clear();
-  append_records(buf, ctx.ks->records.data(), cc.hit.data(), n, origin, ctx.slab2);
+  append_records(buf, ctx.ks->records.data(), cache.hit.data(), n, origin, ctx.slab2);
   buf.finish();
   return true;
 }
