@@ -1,11 +1,10 @@
 #include "projection.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <limits>
 
 #include "candidate_eval.h"
+#include "cell_select.h"
 #include "off_surface.h"
 #include "parallel.h"
 
@@ -13,7 +12,7 @@ namespace scanclean::detail {
 namespace {
 
 struct ProjectionContext {
-  std::uint64_t run = 0;  // unique per project_all call (keys the thread-local cell cache)
+  std::uint64_t cell_key = 0;  // the kernel index's key in the thread-local cell caches
   const KernelSet* ks = nullptr;
   const FilterOptions* o = nullptr;
   float t2 = 9;     // truncation_sigma^2
@@ -22,80 +21,24 @@ struct ProjectionContext {
   OffSurfaceTest off_surface;  // threshold2 = 0: off
 };
 
-// The candidate kernels of a point at `of`: every kernel whose centre lies within
-// gather_factor h (a superset of those the truncation keeps while the point moves by less than
-// a quarter of h), relative to `of`.
-// The kernel centres of the 27 grid cells around one cell, as a struct of arrays padded with
-// +inf to a multiple of 8: points are processed in grid order, so consecutive ones mostly share
-// their cell, and their gathers select from the same list (cell-shared, once per thread).
-struct CellCentres {
-  std::uint64_t run = 0;
-  std::int64_t cell = -1;
-  std::vector<float> x, y, z;
-  std::vector<std::uint32_t> slot;
-};
-
-// The last few cells' centres of one thread: the points of one cell of the point grid are in
-// no particular order and fall into several cells of the (coarser) kernel grid.
-struct CellCache {
-  static constexpr std::size_t kEntries = 8;
-  CellCentres entry[kEntries];
-  std::size_t next = 0;  // round-robin replacement
-  std::vector<std::uint32_t> hit;
-};
-
-std::atomic<std::uint64_t> next_run{1};
-
-// The fast path of the gather: the same candidates, in the same order, as the loop over
-// for_each_cell_run's runs below (the same cells, in the same order, and the same distance
-// test), from the cached centres of the cell.
+// The fast path of the gather (cell_select.h): the same candidates, in the same order, as the
+// loop over for_each_cell_run's runs below (the same cells, in the same order, and the same
+// distance test).
 bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float r,
                  CandidateBuffer& buf) {
-  const NeighborIndex& index = *ctx.ks->index;
-  const std::int64_t c = index.adjacent_cell(of, r);
-  if (c < 0) return false;
-  thread_local CellCache cache;
-  CellCentres* found = nullptr;
-  for (CellCentres& e : cache.entry)
-    if (e.cell == c && e.run == ctx.run) found = &e;
-  if (found == nullptr) {
-    found = &cache.entry[cache.next];
-    cache.next = (cache.next + 1) % CellCache::kEntries;
-    CellCentres& cc = *found;
-    cc.run = ctx.run;
-    cc.cell = c;
-    cc.x.clear();
-    cc.y.clear();
-    cc.z.clear();
-    cc.slot.clear();
-    index.for_each_adjacent_run(static_cast<std::size_t>(c), [&](std::uint32_t b, std::uint32_t e) {
-      for (std::uint32_t s = b; s < e; ++s) {
-        const Eigen::Vector3f& k = index.slot_point(s);
-        cc.x.push_back(k.x());
-        cc.y.push_back(k.y());
-        cc.z.push_back(k.z());
-        cc.slot.push_back(s);
-      }
-    });
-    const float inf = std::numeric_limits<float>::infinity();
-    while (cc.x.size() % 8 != 0) {
-      cc.x.push_back(inf);
-      cc.y.push_back(inf);
-      cc.z.push_back(inf);
-      cc.slot.push_back(0);
-    }
-  }
-  const CellCentres& cc = *found;
-  cache.hit.resize(cc.x.size());
+  CellSelect& sel = thread_cell_select();
+  const std::size_t n = sel.select(*ctx.ks->index, ctx.cell_key, of, r);
+  if (n == CellSelect::kNotGrid) return false;
   const float origin[3] = {of.x(), of.y(), of.z()};
-  const std::size_t n = select_within(cc.x.data(), cc.y.data(), cc.z.data(), cc.slot.data(),
-                                      cc.x.size(), origin, r * r, cache.hit.data());
   buf.clear();
-  append_records(buf, ctx.ks->records.data(), cache.hit.data(), n, origin, ctx.slab2);
+  append_records(buf, ctx.ks->records.data(), sel.hits(), n, origin, ctx.slab2);
   buf.finish();
   return true;
 }
 
+// The candidate kernels of a point at `of`: every kernel whose centre lies within
+// gather_factor h (a superset of those the truncation keeps while the point moves by less than
+// a quarter of h), relative to `of`.
 void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
             CandidateBuffer& buf) {
   const KernelSet& ks = *ctx.ks;
@@ -244,7 +187,7 @@ void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen
                  const std::vector<std::uint8_t>& sparse, std::vector<Eigen::Vector3d>& x,
                  Projected& out, const std::string& phase) {
   ProjectionContext ctx;
-  ctx.run = next_run.fetch_add(1);
+  ctx.cell_key = new_cell_cache_key();
   ctx.ks = &ks;
   ctx.o = &o;
   ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
