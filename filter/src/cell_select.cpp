@@ -20,6 +20,12 @@ std::size_t CellSelect::select(const NeighborIndex& index, std::uint64_t key,
   for (Entry& e : entry_)
     if (e.cell == c && e.key == key) found = &e;
   if (found == nullptr) {
+    // A neighbourhood too large to copy (data concentrated in few cells): the index's own
+    // query, so that the cache stays within kEntries x kMaxPoints x 16 bytes per thread.
+    std::size_t total = 0;
+    index.for_each_adjacent_run(static_cast<std::size_t>(c),
+                                [&](std::uint32_t b, std::uint32_t end) { total += end - b; });
+    if (total > kMaxPoints) return kNotGrid;
     found = &entry_[next_];
     next_ = (next_ + 1) % kEntries;
     Entry& e = *found;

@@ -26,8 +26,9 @@ class CellSelect {
   static constexpr std::size_t kNotGrid = std::numeric_limits<std::size_t>::max();
   //! Selects the slots of the index's points within r of q (squared float distance below
   //! r * r), in for_each_slot_within's order, into hits(); returns their count, or kNotGrid
-  //! (selecting nothing) when the query does not take the index's grid fast path (use the
-  //! index's own queries then). `key` from new_cell_cache_key() for this index.
+  //! (selecting nothing) when the query does not take the index's grid fast path or its 27
+  //! cells hold more than 65,536 points (use the index's own queries then). `key` from
+  //! new_cell_cache_key() for this index.
   std::size_t select(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
                      float r);
   //! The slots of the last select (valid until the next call).
@@ -56,6 +57,7 @@ class CellSelect {
   };
   // One cell of a point grid spans several cells of a coarser grid: keep the last few.
   static constexpr std::size_t kEntries = 8;
+  static constexpr std::size_t kMaxPoints = std::size_t{1} << 16;  // per entry
   Entry entry_[kEntries];
   std::size_t next_ = 0;  // round-robin replacement
   std::vector<std::uint32_t> hit_;

@@ -73,5 +73,20 @@ TEST(CellSelectTest, QueriesOffTheGridAndEmptyRadii) {
   EXPECT_GT(sel.select(a, key, q, 0.05f), 0u);
 }
 
+TEST(CellSelectTest, CrowdedNeighbourhoodsAreLeftToTheIndex) {
+  // 70,000 points in one cell: more than a cache entry holds.
+  std::vector<Eigen::Vector3f> pts = surface_points(70000, 6);
+  for (auto& p : pts) p *= 0.01f;
+  NeighborIndex a(pts, 0.5);
+  const std::uint64_t key = new_cell_cache_key();
+  CellSelect sel;
+  const Eigen::Vector3f q = a.slot_point(123);
+  EXPECT_EQ(sel.select(a, key, q, 0.004f), CellSelect::kNotGrid);
+  std::vector<std::uint32_t> got;
+  sel.for_each_slot_within(a, key, q, 0.004f, [&](std::uint32_t t) { got.push_back(t); });
+  EXPECT_EQ(got, oracle(a, q, 0.004f));
+  EXPECT_GT(got.size(), 100u);
+}
+
 }  // namespace
 }  // namespace scanclean::detail
