@@ -81,24 +81,35 @@ template <class V, class VI>
       dz * load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
 }
 
-template <class V, class VI>
+// kReuse: e_j (slab-masked) and d_j are already in the buffer, from min_mahalanobis at the same
+// x; only the truncation mask is applied (the same values as computing them again).
+template <class V, class VI, bool kReuse>
 [[gnu::always_inline]] inline bool step_impl(CandidateBuffer& b, const float x[3],
                                              const float nref[3], float t2, StepSums& out) {
   constexpr int W = sizeof(V) / sizeof(float);
   const float inf = std::numeric_limits<float>::infinity();
-  const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
   V vmin = V{} + inf;
   const std::size_t n = b.padded;
   float* e_out = b.f[CandidateBuffer::kE].data();
   float* d_out = b.d.data();
-  for (std::size_t j = 0; j < n; j += W) {
-    V e, d;
-    e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
-    const VI keep = (e < t2) & (d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]));
-    const V em = keep ? e : V{} + inf;
-    vmin = em < vmin ? em : vmin;
-    std::memcpy(e_out + j, &em, sizeof(V));
-    std::memcpy(d_out + j, &d, sizeof(V));
+  if constexpr (kReuse) {
+    for (std::size_t j = 0; j < n; j += W) {
+      const V e = load<V, VI>(e_out + j);
+      const V em = e < t2 ? e : V{} + inf;
+      vmin = em < vmin ? em : vmin;
+      std::memcpy(e_out + j, &em, sizeof(V));
+    }
+  } else {
+    const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
+    for (std::size_t j = 0; j < n; j += W) {
+      V e, d;
+      e_and_d<V, VI>(b, j, xs, ys, zs, e, d);
+      const VI keep = (e < t2) & (d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]));
+      const V em = keep ? e : V{} + inf;
+      vmin = em < vmin ? em : vmin;
+      std::memcpy(e_out + j, &em, sizeof(V));
+      std::memcpy(d_out + j, &d, sizeof(V));
+    }
   }
   float emin = inf;
   for (int l = 0; l < W; ++l) emin = std::min(emin, vmin[l]);
@@ -147,6 +158,7 @@ template <class V, class VI>
   const float inf = std::numeric_limits<float>::infinity();
   const V xs = V{} + x[0], ys = V{} + x[1], zs = V{} + x[2];
   float* e_out = b.f[CandidateBuffer::kE].data();
+  float* d_out = b.d.data();
   V vmin = V{} + inf;
   for (std::size_t j = 0; j < b.padded; j += W) {
     V e, d;
@@ -154,6 +166,7 @@ template <class V, class VI>
     const VI keep = d * d < load<V, VI>(&b.f[CandidateBuffer::kSlab2][j]);
     const V em = keep ? e : V{} + inf;
     std::memcpy(e_out + j, &em, sizeof(V));
+    std::memcpy(d_out + j, &d, sizeof(V));
     vmin = em < vmin ? em : vmin;
   }
   float emin = inf;
@@ -189,7 +202,11 @@ typedef int VI8 __attribute__((vector_size(32)));
 
 [[gnu::target("avx2,fma")]] bool step_avx2(CandidateBuffer& b, const float x[3],
                                            const float nref[3], float t2, StepSums& out) {
-  return step_impl<V8, VI8>(b, x, nref, t2, out);
+  return step_impl<V8, VI8, false>(b, x, nref, t2, out);
+}
+[[gnu::target("avx2,fma")]] bool step_reuse_avx2(CandidateBuffer& b, const float nref[3], float t2,
+                                                 StepSums& out) {
+  return step_impl<V8, VI8, true>(b, nullptr, nref, t2, out);
 }
 [[gnu::target("avx2,fma")]] double likelihood_avx2(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V8, VI8>(b, x, t2);
@@ -201,7 +218,10 @@ float min_e_sse(CandidateBuffer& b, const float x[3]) {
   return min_e_impl<V4, VI4>(b, x);
 }
 bool step_sse(CandidateBuffer& b, const float x[3], const float nref[3], float t2, StepSums& out) {
-  return step_impl<V4, VI4>(b, x, nref, t2, out);
+  return step_impl<V4, VI4, false>(b, x, nref, t2, out);
+}
+bool step_reuse_sse(CandidateBuffer& b, const float nref[3], float t2, StepSums& out) {
+  return step_impl<V4, VI4, true>(b, nullptr, nref, t2, out);
 }
 double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   return likelihood_impl<V4, VI4>(b, x, t2);
@@ -251,6 +271,57 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
+// For each 8-bit mask, the indices of its set bits in increasing order (then zeros).
+struct PackTable {
+  std::int32_t lane[256][8];
+  constexpr PackTable() : lane{} {
+    for (int m = 0; m < 256; ++m) {
+      int k = 0;
+      for (int b = 0; b < 8; ++b)
+        if (m & (1 << b)) lane[m][k++] = b;
+    }
+  }
+};
+constexpr PackTable kPack;
+
+// AVX2 without FMA: the squared distances are rounded as in the scalar loop.
+[[gnu::target("avx2")]] std::size_t select_avx2(const float* x, const float* y, const float* z,
+                                                const std::uint32_t* slots, std::size_t n,
+                                                const float origin[3], float r2,
+                                                std::uint32_t* out) {
+  const __m256 ox = _mm256_set1_ps(origin[0]), oy = _mm256_set1_ps(origin[1]),
+               oz = _mm256_set1_ps(origin[2]), rr = _mm256_set1_ps(r2);
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; j += 8) {
+    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), ox);
+    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), oy);
+    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), oz);
+    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                    _mm256_mul_ps(dz, dz));
+    const unsigned mask =
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ)));
+    // Left-pack the selected lanes' slots: all 8 are stored at m <= j (so within n), the count
+    // advances by the selected.
+    const __m256i s = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots + j));
+    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kPack.lane[mask]));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + m), _mm256_permutevar8x32_epi32(s, perm));
+    m += static_cast<std::size_t>(__builtin_popcount(mask));
+  }
+  return m;
+}
+
+std::size_t select_scalar(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out) {
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; ++j) {
+    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+    out[m] = slots[j];
+    m += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
+  }
+  return m;
+}
+
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
   return yes;
@@ -261,6 +332,12 @@ bool have_avx2() {
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out) {
   return have_avx2() ? step_avx2(buffer, x, nref, t2, out) : step_sse(buffer, x, nref, t2, out);
+}
+
+bool step_sums_after_min_mahalanobis(CandidateBuffer& buffer, const float nref[3], float t2,
+                                     StepSums& out) {
+  return have_avx2() ? step_reuse_avx2(buffer, nref, t2, out)
+                     : step_reuse_sse(buffer, nref, t2, out);
 }
 
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]) {
@@ -280,6 +357,13 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
     for (std::size_t k = 0; k < n; ++k)
       buffer.push_record(slots[k], records[slots[k]], origin, slab2);
   }
+}
+
+std::size_t select_within(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out) {
+  return have_avx2() ? select_avx2(x, y, z, slots, n, origin, r2, out)
+                     : select_scalar(x, y, z, slots, n, origin, r2, out);
 }
 
 float fast_exp(float a) {

@@ -89,11 +89,23 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
 //! s_j n_j with s_j = sign(n_j . nref).
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out);
+//! step_sums at the x of the min_mahalanobis call just before (no other call in between):
+//! takes e_j and d_j from the buffer instead of computing them again; the same results, bit
+//! for bit.
+bool step_sums_after_min_mahalanobis(CandidateBuffer& buffer, const float nref[3], float t2,
+                                     StepSums& out);
 //! min e_j at x over the candidates that pass the slab test (d_j^2 < slab2_j); +inf if there is
-//! none. Fills buffer.f[kE] with e_j (+inf where the slab test fails).
+//! none. Fills buffer.f[kE] with e_j (+inf where the slab test fails) and buffer.d with d_j.
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
+//! Writes to out, in order, the slots[j] of the points (x[j], y[j], z[j]), j < n, whose
+//! squared distance to origin, (dx dx + dy dy) + dz dz in float without fused multiply-add (as
+//! a plain scalar loop computes it), is below r2; returns their count. n a multiple of 8
+//! (pad with +inf coordinates); out holds n entries (past the count it is scratch).
+std::size_t select_within(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out);
 //! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error below 5e-7 on
 //! [-10, 0], where the loops use it; up to 4e-6 towards -80, from rounding a log2(e) in float).
 float fast_exp(float a);

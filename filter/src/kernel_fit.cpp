@@ -2,8 +2,81 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <cstring>
 
 namespace scanclean::detail {
+namespace {
+
+typedef double V4d __attribute__((vector_size(32)));
+typedef long long V4l __attribute__((vector_size(32)));
+
+// Three accumulators of four lanes: (t x, t y, t z, t), (t x x, t y y, t z z, -), and
+// (t x y, t x z, t y z, -); every lane is one of the scalar sums, added in sample order.
+[[gnu::always_inline]] inline FitSums sums_impl(const FitSample* q, std::size_t n) {
+  static_assert(sizeof(FitSample) == sizeof(V4d), "a sample is four doubles");
+  V4d a{}, b{}, c{};
+  for (std::size_t k = 0; k < n; ++k) {
+    V4d v;  // x y z t
+    std::memcpy(&v, &q[k], sizeof v);
+    V4d xyz1 = v;
+    xyz1[3] = 1.0;
+    const V4d t = V4d{} + v[3];
+    const V4d tx = t * xyz1;  // t x, t y, t z, t
+    a += tx;
+    b += tx * xyz1;
+    c += __builtin_shuffle(tx, V4l{0, 0, 1, 1}) * __builtin_shuffle(v, V4l{1, 2, 2, 2});
+  }
+  FitSums s;
+  s.sx = a[0];
+  s.sy = a[1];
+  s.sz = a[2];
+  s.s0 = a[3];
+  s.sxx = b[0];
+  s.syy = b[1];
+  s.szz = b[2];
+  s.sxy = c[0];
+  s.sxz = c[1];
+  s.syz = c[2];
+  return s;
+}
+
+// AVX2 without FMA: the products and sums stay separately rounded, as in the scalar loop.
+[[gnu::target("avx2")]] FitSums sums_avx2(const FitSample* q, std::size_t n) {
+  return sums_impl(q, n);
+}
+FitSums sums_sse2(const FitSample* q, std::size_t n) {
+  return sums_impl(q, n);
+}
+
+bool have_avx2() {
+  static const bool yes = __builtin_cpu_supports("avx2");
+  return yes;
+}
+
+}  // namespace
+
+FitSums fit_sums(const FitSample* samples, std::size_t n) {
+  return have_avx2() ? sums_avx2(samples, n) : sums_sse2(samples, n);
+}
+
+FitSums fit_sums_scalar(const FitSample* samples, std::size_t n) {
+  FitSums s;
+  for (std::size_t k = 0; k < n; ++k) {
+    const FitSample& q = samples[k];
+    const double t = q.t;
+    s.s0 += t;
+    s.sx += t * q.x;
+    s.sy += t * q.y;
+    s.sz += t * q.z;
+    s.sxx += t * q.x * q.x;
+    s.syy += t * q.y * q.y;
+    s.szz += t * q.z * q.z;
+    s.sxy += t * q.x * q.y;
+    s.sxz += t * q.x * q.z;
+    s.syz += t * q.y * q.z;
+  }
+  return s;
+}
 
 bool fit_samples(std::vector<FitSample>& nb, const Eigen::Vector3d& centre, double h, int k_min,
                  double eigen_floor, KernelFit& out) {
@@ -16,20 +89,9 @@ bool fit_samples(std::vector<FitSample>& nb, const Eigen::Vector3d& centre, doub
   Eigen::Matrix3d cov;
   double s0_final = 0;
   for (int round = 0;; ++round) {
-    double s0 = 0, sx = 0, sy = 0, sz = 0, sxx = 0, syy = 0, szz = 0, sxy = 0, sxz = 0, syz = 0;
-    for (const FitSample& q : nb) {
-      const double t = q.t;
-      s0 += t;
-      sx += t * q.x;
-      sy += t * q.y;
-      sz += t * q.z;
-      sxx += t * q.x * q.x;
-      syy += t * q.y * q.y;
-      szz += t * q.z * q.z;
-      sxy += t * q.x * q.y;
-      sxz += t * q.x * q.z;
-      syz += t * q.y * q.z;
-    }
+    const FitSums fs = fit_sums(nb.data(), nb.size());
+    const double s0 = fs.s0, sx = fs.sx, sy = fs.sy, sz = fs.sz, sxx = fs.sxx, syy = fs.syy,
+                 szz = fs.szz, sxy = fs.sxy, sxz = fs.sxz, syz = fs.syz;
     if (static_cast<int>(nb.size()) < k_min || !(s0 > 0)) return false;
     s0_final = s0;
     m = Eigen::Vector3d(sx / s0, sy / s0, sz / s0);

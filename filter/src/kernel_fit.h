@@ -27,6 +27,19 @@ struct FitSample {
   double x, y, z, t;
 };
 
+//! The weighted sums of the fit (eq. 2) over samples: sum t, sum t x, ..., sum t x x, ...,
+//! sum t x y, each summed in sample order as sequential doubles, and each product formed as
+//! (t x) y. The vector path (4 doubles a lane, AVX2 when the CPU has it) does the very same
+//! operations per sum, so it gives the scalar loop's results bit for bit.
+struct FitSums {
+  double s0 = 0, sx = 0, sy = 0, sz = 0;
+  double sxx = 0, syy = 0, szz = 0;
+  double sxy = 0, sxz = 0, syz = 0;
+};
+FitSums fit_sums(const FitSample* samples, std::size_t n);
+//! The scalar reference of fit_sums (tests).
+FitSums fit_sums_scalar(const FitSample* samples, std::size_t n);
+
 //! The weighted PCA of `samples` around the centre point `centre` (eq. 2), repeated without the
 //! samples farther than 3 standard deviations from its plane (sqrt of lambda_3, at least the
 //! eigenvalue floor eigen_floor h), at most twice. A near outlier would otherwise stretch the

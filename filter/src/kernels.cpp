@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdint>
 
+#include "cell_select.h"
 #include "kernel_fit.h"
 #include "parallel.h"
 #include "plane_refit.h"
@@ -29,6 +30,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   refit.k_min = o.k_min;
   refit.eigen_floor = o.eigen_floor;
   std::vector<std::uint8_t> refitted(refit.active() ? nk : 0, 0);
+  const std::uint64_t cell_key = new_cell_cache_key();
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     if (i % stride != 0) return;  // d is in grid order: a spatially even subsample
     const double h = d.hi_at(i);
@@ -37,8 +39,9 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     KernelFit fit;
     auto visit = [&](auto&& g) {
       auto cb = [&](std::uint32_t j, float) { g(j); };
-      if (by_slot)
-        idx.for_each_slot_within(qi, static_cast<float>(h * 1.0001), cb);
+      if (by_slot)  // through the cell cache: the same slots in the same order
+        thread_cell_select().for_each_slot_within(idx, cell_key, qi, static_cast<float>(h * 1.0001),
+                                                  [&](std::uint32_t j) { g(j); });
       else
         idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
     };

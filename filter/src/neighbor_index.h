@@ -47,6 +47,9 @@ class NeighborIndex {
   void for_each_slot_within(const Eigen::Vector3f& q, float r, F&& f) const {
     visit<true>(q, r, f);
   }
+  //! The occupied cell whose adjacent runs (for_each_adjacent_run) for_each_cell_run(q, r, f)
+  //! passes to f, in that order, when it takes its fast path; -1 when it does not.
+  std::int64_t adjacent_cell(const Eigen::Vector3f& q, float r) const;
   //! Calls f(begin_slot, end_slot) for every occupied grid cell that may hold points within r
   //! of q (a superset of the ball; callers filter by distance). Returns false, calling nothing,
   //! when r is too large for the grid (use for_each_slot_within then).
@@ -184,24 +187,26 @@ void NeighborIndex::visit(const Eigen::Vector3f& q, float r, F& f) const {
       }
 }
 
+inline std::int64_t NeighborIndex::adjacent_cell(const Eigen::Vector3f& q, float r) const {
+  if (pts_.empty() || !grid_ || !(r <= cell_f_)) return -1;
+  std::int32_t c3[3];
+  bool inside = true;
+  for (int a = 0; a < 3; ++a) {
+    const float c = std::floor((q[a] - lo_[a]) * inv_cell_);
+    inside = inside && c >= 0 && c <= static_cast<float>(dims_[a] - 1);
+    c3[a] = inside ? static_cast<std::int32_t>(c) : 0;
+  }
+  return inside ? find_cell(detail::cell_key(c3[0], c3[1], c3[2])) : -1;
+}
+
 template <class F>
 bool NeighborIndex::for_each_cell_run(const Eigen::Vector3f& q, float r, F&& f) const {
   if (pts_.empty()) return true;
   if (!grid_) return false;
-  if (r <= cell_f_) {
-    std::int32_t c3[3];
-    bool inside = true;
-    for (int a = 0; a < 3; ++a) {
-      const float c = std::floor((q[a] - lo_[a]) * inv_cell_);
-      inside = inside && c >= 0 && c <= static_cast<float>(dims_[a] - 1);
-      c3[a] = inside ? static_cast<std::int32_t>(c) : 0;
-    }
-    const std::int64_t cq = inside ? find_cell(detail::cell_key(c3[0], c3[1], c3[2])) : -1;
-    if (cq >= 0) {
-      for (std::uint32_t k = adj_begin_[cq], ke = adj_begin_[cq + 1]; k < ke; ++k)
-        f(cell_begin_[adj_[k]], cell_begin_[adj_[k] + 1]);
-      return true;
-    }
+  const std::int64_t cq = adjacent_cell(q, r);
+  if (cq >= 0) {
+    for_each_adjacent_run(static_cast<std::size_t>(cq), f);
+    return true;
   }
   std::int32_t lo[3], hi[3];
   for (int a = 0; a < 3; ++a) {

@@ -5,6 +5,7 @@
 #include <memory>
 #include <numeric>
 
+#include "cell_select.h"
 #include "neighbor_index.h"
 #include "parallel.h"
 
@@ -97,14 +98,20 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         parallel_each(sub.size(), [&](std::size_t k) { sub[k] = ridx.slot_point(k * stride); });
         thinned = std::make_unique<NeighborIndex>(std::move(sub), in.cell * 1.001);
       }
+      // Through the per-thread cell cache (cell_select.h): the same points as the index's own
+      // radius query.
+      const std::uint64_t cell_key = new_cell_cache_key();
       auto for_each_around = [&](std::size_t s, auto&& visit) {
-        if (thinned)
-          thinned->for_each_within(ridx.slot_point(s), hs[s], [&](std::uint32_t k, float) {
-            visit(static_cast<std::uint32_t>(k * stride));
-          });
-        else
-          ridx.for_each_slot_within(ridx.slot_point(s), hs[s],
-                                    [&](std::uint32_t q, float) { visit(q); });
+        CellSelect& sel = thread_cell_select();
+        if (thinned) {
+          const std::vector<std::uint32_t>& id = thinned->order();
+          sel.for_each_slot_within(
+              *thinned, cell_key, ridx.slot_point(s), hs[s],
+              [&](std::uint32_t t) { visit(static_cast<std::uint32_t>(id[t] * stride)); });
+        } else {
+          sel.for_each_slot_within(ridx, cell_key, ridx.slot_point(s), hs[s],
+                                   [&](std::uint32_t q) { visit(q); });
+        }
       };
       // Displacement test: the median of the moves around s and 1.4826 x their median absolute
       // deviation (the robust standard deviation), floored at 0.02 h; none (scale 0) when fewer

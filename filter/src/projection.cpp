@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "candidate_eval.h"
+#include "cell_select.h"
 #include "off_surface.h"
 #include "parallel.h"
 
@@ -11,6 +12,7 @@ namespace scanclean::detail {
 namespace {
 
 struct ProjectionContext {
+  std::uint64_t cell_key = 0;  // the kernel index's key in the thread-local cell caches
   const KernelSet* ks = nullptr;
   const FilterOptions* o = nullptr;
   float t2 = 9;     // truncation_sigma^2
@@ -19,6 +21,21 @@ struct ProjectionContext {
   OffSurfaceTest off_surface;  // threshold2 = 0: off
 };
 
+// The fast path of the gather (cell_select.h): the same candidates, in the same order, as the
+// loop over for_each_cell_run's runs below (the same cells, in the same order, and the same
+// distance test).
+bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float r,
+                 CandidateBuffer& buf) {
+  CellSelect& sel = thread_cell_select();
+  const std::size_t n = sel.select(*ctx.ks->index, ctx.cell_key, of, r);
+  if (n == CellSelect::kNotGrid) return false;
+  const float origin[3] = {of.x(), of.y(), of.z()};
+  buf.clear();
+  append_records(buf, ctx.ks->records.data(), sel.hits(), n, origin, ctx.slab2);
+  buf.finish();
+  return true;
+}
+
 // The candidate kernels of a point at `of`: every kernel whose centre lies within
 // gather_factor h (a superset of those the truncation keeps while the point moves by less than
 // a quarter of h), relative to `of`.
@@ -26,6 +43,7 @@ void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
             CandidateBuffer& buf) {
   const KernelSet& ks = *ctx.ks;
   const float r = static_cast<float>(ctx.gather_factor * h), r2 = r * r;
+  if (gather_cell(ctx, of, r, buf)) return;
   const float origin[3] = {of.x(), of.y(), of.z()};
   buf.clear();
   const KernelRecord* records = ks.records.data();
@@ -69,6 +87,8 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
   gather(ctx, of, h, buf);
+  // The first step reuses the e_j and d_j of the off-surface test, at the same position.
+  bool first_step_ready = false;
   if (ctx.off_surface.threshold2 > 0 && buf.count > 0) {
     // Only points the kernels support at all (as the first iteration will check); the others
     // are left to be flagged unsupported.
@@ -80,6 +100,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       out.normal = nref;
       return out;
     }
+    first_step_ready = true;
   }
   // x relative to the candidates' origin, in float; the candidates are gathered again around x
   // once it has moved by more than a quarter of h from where they were gathered.
@@ -88,6 +109,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       of = x.cast<float>();
       origin = of.cast<double>();
       gather(ctx, of, h, buf);
+      first_step_ready = false;
     }
     const Eigen::Vector3d xl = x - origin;
     for (int a = 0; a < 3; ++a) xf[a] = static_cast<float>(xl[a]);
@@ -102,7 +124,11 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     float xf[3];
     local_position(xf);
     StepSums s;
-    if (!step_sums(buf, xf, nref.data(), ctx.t2, s)) {
+    const bool kept = first_step_ready
+                          ? step_sums_after_min_mahalanobis(buf, nref.data(), ctx.t2, s)
+                          : step_sums(buf, xf, nref.data(), ctx.t2, s);
+    first_step_ready = false;
+    if (!kept) {
       out.state = ProjectionState::kUnsupported;
       out.iterations = static_cast<std::uint8_t>(iters);
       out.normal = nref;
@@ -161,6 +187,7 @@ void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen
                  const std::vector<std::uint8_t>& sparse, std::vector<Eigen::Vector3d>& x,
                  Projected& out, const std::string& phase) {
   ProjectionContext ctx;
+  ctx.cell_key = new_cell_cache_key();
   ctx.ks = &ks;
   ctx.o = &o;
   ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);

@@ -119,6 +119,78 @@ TEST(CandidateEvalTest, VectorisedLoopsMatchTheScalarReference) {
   }
 }
 
+TEST(CandidateEvalTest, StepAfterMinMahalanobisEqualsAFreshStepBitForBit) {
+  const float t2 = 9, slab2 = 1;
+  int kept_trials = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const int n = 1 + trial * 7;
+    const std::vector<KernelRecord> k = random_kernels(n, 300 + trial);
+    std::vector<std::uint32_t> slots(n);
+    for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
+    const float origin[3] = {0.002f, 0.001f, -0.0005f};
+    CandidateBuffer buf;
+    buf.clear();
+    append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
+    buf.finish();
+    // Points at and off the kernels, some beyond the truncation of every one.
+    const float xf[3] = {0.0004f * static_cast<float>(trial % 5), -0.0007f,
+                         0.002f * static_cast<float>(trial % 4)};
+    const float nref[3] = {0, 0.6f, 0.8f};
+    StepSums fresh, reused;
+    const bool kept_fresh = step_sums(buf, xf, nref, t2, fresh);
+    min_mahalanobis(buf, xf);
+    const bool kept_reused = step_sums_after_min_mahalanobis(buf, nref, t2, reused);
+    ASSERT_EQ(kept_fresh, kept_reused) << "trial " << trial;
+    if (!kept_fresh) continue;
+    ++kept_trials;
+    EXPECT_EQ(fresh.e_min, reused.e_min) << "trial " << trial;
+    EXPECT_EQ(fresh.s, reused.s) << "trial " << trial;
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_EQ(fresh.dn[a], reused.dn[a]) << "trial " << trial << " axis " << a;
+      EXPECT_EQ(fresh.n[a], reused.n[a]) << "trial " << trial << " axis " << a;
+    }
+  }
+  EXPECT_GT(kept_trials, 5);  // the comparison was made, not skipped
+}
+
+TEST(CandidateEvalTest, SelectWithinEqualsTheScalarDistanceTest) {
+  // Points around a sphere of radius r (many within a few ulps of it), padded with +inf.
+  std::mt19937 rng(21);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u(0.999f, 1.001f);
+  const float origin[3] = {0.31f, -0.12f, 0.05f};
+  const float r = 0.0125f, r2 = r * r;
+  std::vector<float> x, y, z;
+  std::vector<std::uint32_t> slots;
+  for (int j = 0; j < 203; ++j) {
+    Eigen::Vector3f v(g(rng), g(rng), g(rng));
+    v *= r * u(rng) / v.norm();
+    x.push_back(origin[0] + v.x());
+    y.push_back(origin[1] + v.y());
+    z.push_back(origin[2] + v.z());
+    slots.push_back(static_cast<std::uint32_t>(1000 + 3 * j));
+  }
+  std::vector<std::uint32_t> expected;
+  for (std::size_t j = 0; j < x.size(); ++j) {
+    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+    const float d2 = dx * dx + dy * dy;
+    if (d2 + dz * dz < r2) expected.push_back(slots[j]);
+  }
+  while (x.size() % 8 != 0) {
+    x.push_back(std::numeric_limits<float>::infinity());
+    y.push_back(std::numeric_limits<float>::infinity());
+    z.push_back(std::numeric_limits<float>::infinity());
+    slots.push_back(7);
+  }
+  std::vector<std::uint32_t> out(x.size());
+  const std::size_t n =
+      select_within(x.data(), y.data(), z.data(), slots.data(), x.size(), origin, r2, out.data());
+  out.resize(n);
+  EXPECT_EQ(out, expected);
+  EXPECT_GT(expected.size(), 50u);  // both sides of the sphere are present
+  EXPECT_LT(expected.size(), 150u);
+}
+
 TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {
   const std::vector<KernelRecord> k = random_kernels(37, 7);
   std::vector<std::uint32_t> slots;

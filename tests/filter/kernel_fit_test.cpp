@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <cmath>
 #include <random>
 
 namespace scanclean::detail {
@@ -90,6 +91,27 @@ TEST(KernelFitTest, TooFewSamplesGiveNoFit) {
   KernelFit fit;
   EXPECT_FALSE(fit_samples(s, Eigen::Vector3d::Zero(), 0.01, 8, 0.05, fit));
   EXPECT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), 0.01, 7, 0.05, fit));
+}
+
+TEST(KernelFitTest, VectorSumsEqualTheScalarLoopBitForBit) {
+  // Samples far from the origin and with widely spread weights, so that any change of rounding
+  // (order, fused multiply-add) would show in the last bits.
+  std::mt19937 rng(14);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const int n : {0, 1, 3, 8, 97, 250}) {
+    std::vector<FitSample> s;
+    for (int k = 0; k < n; ++k)
+      s.push_back({3.1 + 1e-3 * u(rng), -7.7 + 1e-3 * u(rng), 0.2 + 1e-3 * u(rng),
+                   std::pow(0.5 + 0.5 * u(rng), 4)});
+    const FitSums v = fit_sums(s.data(), s.size());
+    const FitSums r = fit_sums_scalar(s.data(), s.size());
+    const double vs[10] = {v.s0, v.sx, v.sy, v.sz, v.sxx, v.syy, v.szz, v.sxy, v.sxz, v.syz};
+    const double rs[10] = {r.s0, r.sx, r.sy, r.sz, r.sxx, r.syy, r.szz, r.sxy, r.sxz, r.syz};
+    for (int f = 0; f < 10; ++f) EXPECT_EQ(vs[f], rs[f]) << "n " << n << ", sum " << f;
+    if (n > 0) {
+      EXPECT_GT(r.sxx, 0.0);
+    }
+  }
 }
 
 }  // namespace

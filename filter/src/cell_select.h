@@ -1,0 +1,69 @@
+#pragma once
+//! Internal: radius queries on a NeighborIndex answered from a per-thread cache of grid cell
+//! neighbourhoods. The filter queries points in grid order, so consecutive queries mostly fall
+//! into the same few cells; the points of a cell's 27 neighbour cells are copied once into a
+//! struct of arrays and each query selects from it 8 points at a time (candidate_eval.h
+//! select_within: the same float distance test as the index's own loop). The selected slots
+//! come in the order NeighborIndex::for_each_slot_within visits them, so results that depend
+//! on the order (sums) stay bit-identical.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "neighbor_index.h"
+
+namespace scanclean::detail {
+
+//! A key for one index (unique per call), so that a thread's cache never serves the cells of
+//! another index (or of an earlier one at the same address).
+std::uint64_t new_cell_cache_key();
+
+class CellSelect {
+ public:
+  static constexpr std::size_t kNotGrid = std::numeric_limits<std::size_t>::max();
+  //! Selects the slots of the index's points within r of q (squared float distance below
+  //! r * r), in for_each_slot_within's order, into hits(); returns their count, or kNotGrid
+  //! (selecting nothing) when the query does not take the index's grid fast path or its 27
+  //! cells hold more than 65,536 points (use the index's own queries then). `key` from
+  //! new_cell_cache_key() for this index.
+  std::size_t select(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
+                     float r);
+  //! The slots of the last select (valid until the next call).
+  const std::uint32_t* hits() const { return hit_.data(); }
+
+  //! f(slot) for each slot within r of q, in for_each_slot_within's order, through the cache
+  //! when the query takes the grid fast path, else through for_each_slot_within. f must not
+  //! use this CellSelect.
+  template <class F>
+  void for_each_slot_within(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
+                            float r, F&& f) {
+    const std::size_t n = select(index, key, q, r);
+    if (n == kNotGrid) {
+      index.for_each_slot_within(q, r, [&](std::uint32_t s, float) { f(s); });
+      return;
+    }
+    for (std::size_t k = 0; k < n; ++k) f(hit_[k]);
+  }
+
+ private:
+  struct Entry {
+    std::uint64_t key = 0;
+    std::int64_t cell = -1;
+    std::vector<float> x, y, z;  // padded with +inf to a multiple of 8
+    std::vector<std::uint32_t> slot;
+  };
+  // One cell of a point grid spans several cells of a coarser grid: keep the last few.
+  static constexpr std::size_t kEntries = 8;
+  static constexpr std::size_t kMaxPoints = std::size_t{1} << 16;  // per entry
+  Entry entry_[kEntries];
+  std::size_t next_ = 0;  // round-robin replacement
+  std::vector<std::uint32_t> hit_;
+};
+
+//! The calling thread's CellSelect.
+CellSelect& thread_cell_select();
+
+}  // namespace scanclean::detail

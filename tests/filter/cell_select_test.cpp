@@ -1,0 +1,92 @@
+// The cached cell-neighbourhood radius queries (filter/src/cell_select.h) against the index's own
+// for_each_slot_within (the oracle): the same slots in the same order, on the fast path, on the
+// fallback (a radius larger than the grid answers), across several indexes sharing one thread's
+// cache, and for a query off the grid.
+
+#include "../../filter/src/cell_select.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace scanclean::detail {
+namespace {
+
+std::vector<Eigen::Vector3f> surface_points(int n, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::normal_distribution<float> g(0.0f, 0.01f);
+  std::vector<Eigen::Vector3f> p;
+  for (int i = 0; i < n; ++i) {
+    const float x = u(rng), y = u(rng);
+    p.emplace_back(x, y, 0.2f * x * y + g(rng));  // a noisy saddle
+  }
+  return p;
+}
+
+std::vector<std::uint32_t> oracle(const NeighborIndex& index, const Eigen::Vector3f& q, float r) {
+  std::vector<std::uint32_t> out;
+  index.for_each_slot_within(q, r, [&](std::uint32_t s, float) { out.push_back(s); });
+  return out;
+}
+
+TEST(CellSelectTest, SameSlotsInTheSameOrderAsTheIndex) {
+  const std::vector<Eigen::Vector3f> pts = surface_points(20000, 3);
+  const float cell = 0.05f;
+  NeighborIndex a(pts, cell), b(surface_points(5000, 4), 2 * cell);
+  const std::uint64_t key_a = new_cell_cache_key(), key_b = new_cell_cache_key();
+  ASSERT_NE(key_a, key_b);
+  CellSelect sel;
+  std::size_t fast = 0, total = 0;
+  for (std::size_t s = 0; s < a.size(); s += 37) {
+    const Eigen::Vector3f q = a.slot_point(s);
+    // Radii within the grid's fast path and beyond it (fallback), alternating indexes so that
+    // the cache holds cells of both.
+    for (const float r : {0.3f * cell, 0.9f * cell, 2.5f * cell}) {
+      std::vector<std::uint32_t> got;
+      sel.for_each_slot_within(a, key_a, q, r, [&](std::uint32_t t) { got.push_back(t); });
+      EXPECT_EQ(got, oracle(a, q, r)) << "slot " << s << " r " << r;
+      fast += sel.select(a, key_a, q, r) != CellSelect::kNotGrid ? 1 : 0;
+      ++total;
+      got.clear();
+      sel.for_each_slot_within(b, key_b, q, r, [&](std::uint32_t t) { got.push_back(t); });
+      EXPECT_EQ(got, oracle(b, q, r)) << "slot " << s << " r " << r << " (second index)";
+    }
+  }
+  EXPECT_GT(fast, total / 2);  // the cache answered most queries
+  EXPECT_LT(fast, total);      // and the fallback was exercised
+}
+
+TEST(CellSelectTest, QueriesOffTheGridAndEmptyRadii) {
+  NeighborIndex a(surface_points(2000, 5), 0.1);
+  const std::uint64_t key = new_cell_cache_key();
+  CellSelect sel;
+  const Eigen::Vector3f far(5.0f, 5.0f, 5.0f);
+  EXPECT_EQ(sel.select(a, key, far, 0.05f), CellSelect::kNotGrid);
+  std::vector<std::uint32_t> got;
+  sel.for_each_slot_within(a, key, far, 0.05f, [&](std::uint32_t t) { got.push_back(t); });
+  EXPECT_TRUE(got.empty());
+  const Eigen::Vector3f q = a.slot_point(10);
+  EXPECT_EQ(sel.select(a, key, q, 0.0f), 0u);
+  EXPECT_EQ(sel.select(a, key, q, -0.05f), 0u);
+  EXPECT_EQ(oracle(a, q, -0.05f).size(), 0u);
+  EXPECT_GT(sel.select(a, key, q, 0.05f), 0u);
+}
+
+TEST(CellSelectTest, CrowdedNeighbourhoodsAreLeftToTheIndex) {
+  // 70,000 points in one cell: more than a cache entry holds.
+  std::vector<Eigen::Vector3f> pts = surface_points(70000, 6);
+  for (auto& p : pts) p *= 0.01f;
+  NeighborIndex a(pts, 0.5);
+  const std::uint64_t key = new_cell_cache_key();
+  CellSelect sel;
+  const Eigen::Vector3f q = a.slot_point(123);
+  EXPECT_EQ(sel.select(a, key, q, 0.004f), CellSelect::kNotGrid);
+  std::vector<std::uint32_t> got;
+  sel.for_each_slot_within(a, key, q, 0.004f, [&](std::uint32_t t) { got.push_back(t); });
+  EXPECT_EQ(got, oracle(a, q, 0.004f));
+  EXPECT_GT(got.size(), 100u);
+}
+
+}  // namespace
+}  // namespace scanclean::detail
