@@ -15,6 +15,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/io/ply_stream_writer.h"
 #include "scanclean/io/point_stream.h"
+#include "scanclean/provenance.h"
 
 namespace scanclean::app {
 
@@ -142,10 +143,13 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
     outlier_layout.attributes = {{"flags", AttributeType::kUInt8},
                                  {"source_index", AttributeType::kUInt32}};
     if (rank0) {
+      // The same provenance comment as the in-memory run's outputs (h, noise sigma, command).
+      const std::string prov =
+          req.provenance.empty() ? provenance_text(g.h, g.noise_sigma) : req.provenance;
       group = std::make_unique<AtomicCommitGroup>();
-      out = std::make_unique<PlyStreamWriter>(req.output, cloud_layout, req.provenance);
+      out = std::make_unique<PlyStreamWriter>(req.output, cloud_layout, prov);
       if (!req.outliers.empty())
-        outl = std::make_unique<PlyStreamWriter>(req.outliers, outlier_layout, req.provenance);
+        outl = std::make_unique<PlyStreamWriter>(req.outliers, outlier_layout, prov);
     }
   };
   const TileSink sink = [&](std::size_t tile, const PointCloud& c, const PointCloud& o) {

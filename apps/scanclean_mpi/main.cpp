@@ -14,6 +14,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/filter_options_cli.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/provenance.h"
 #include "scanclean/summary.h"
 #include "scanclean/tiled_run.h"
 
@@ -89,6 +90,7 @@ int run(int argc, char** argv, int rank, int ranks) {
     const int rc = rank == 0 ? cli.exit(e) : (e.get_exit_code() == 0 ? 0 : 1);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::kBadOptions);
   }
+  set_command_line(argc, argv, "scanclean-mpi");  // the outputs' provenance comment
   check_input_files("scanclean-mpi", {{"input", input}});
   check_output_files("scanclean-mpi", {{"input", input}},
                      {{"-o", output}, {"--outliers", outliers}});

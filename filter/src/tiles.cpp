@@ -634,8 +634,11 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
           in_g.push_back(nn.empty() ? 0 : nn[0].second);
         }
       }
+      // As scale.h: the noise over the first M / step of them, the scale test over all.
+      const std::vector<std::size_t> in_g_sigma(
+          in_g.begin(), in_g.begin() + static_cast<std::ptrdiff_t>(qf.size() / step));
       const detail::TileScale ts =
-          detail::scale_from_neighbourhoods(g, in_g, gl.h0, diag, use_v, o);
+          detail::scale_from_neighbourhoods(g, in_g_sigma, in_g, gl.h0, diag, use_v, o);
       if (ts.reach <= R || R >= 2 * diag + fallback_h) {
         gl.h = ts.h;
         gl.noise_sigma = ts.noise_sigma;
