@@ -11,6 +11,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "kernels.h"
 #include "neighbor_index.h"
 #include "parallel.h"
 #include "point_set.h"
@@ -139,6 +140,58 @@ Grid make_grid(const Eigen::AlignedBox3d& box) {
     g.dims[a] = std::max<std::int64_t>(1, static_cast<std::int64_t>(std::ceil(ext[a] / g.cell)));
   return g;
 }
+
+// ---- the in-memory run's kernel subsample (kernels.h: every stride-th point in grid order) ----
+
+// The Morton code of neighbor_index.cpp: the low 21 bits of x, y and z interleaved.
+std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+
+// The grid of the point index the in-memory run builds over the whole cloud (cell h x 1.001,
+// float coordinates relative to the box centre, anchored half a cell below their minimum: the
+// arithmetic of NeighborIndex's constructor), so that a point's cell, hence its place in the
+// whole cloud's grid order, is known from the first pass's box and h alone.
+struct SiteGrid {
+  Eigen::Vector3f lo = Eigen::Vector3f::Zero();
+  float inv_cell = 1;
+  std::int32_t dims[3] = {1, 1, 1};
+  std::uint64_t code(const Eigen::Vector3f& p) const {
+    std::uint64_t c[3];
+    for (int a = 0; a < 3; ++a) {
+      const float f = std::floor((p[a] - lo[a]) * inv_cell);
+      c[a] = static_cast<std::uint64_t>(
+          static_cast<std::int32_t>(std::clamp(f, 0.0f, static_cast<float>(dims[a] - 1))));
+    }
+    return spread_bits(c[0]) | (spread_bits(c[1]) << 1) | (spread_bits(c[2]) << 2);
+  }
+};
+
+SiteGrid site_grid(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& origin, double h) {
+  SiteGrid g;
+  // Rounding is monotonic: the smallest float coordinate is the float of the smallest one.
+  const Eigen::Vector3f lo = (box.min() - origin).cast<float>();
+  const Eigen::Vector3f hi = (box.max() - origin).cast<float>();
+  double cell = h * 1.001;
+  const double max_extent = (hi - lo).cast<double>().maxCoeff();
+  constexpr double kMaxCells = (1 << 21) - 2;
+  if (max_extent / cell > kMaxCells) cell = max_extent / kMaxCells * (1 + 1e-6);
+  g.lo = lo - Eigen::Vector3f::Constant(static_cast<float>(cell) * 0.5f);
+  g.inv_cell = static_cast<float>(1.0 / cell);
+  for (int a = 0; a < 3; ++a)
+    g.dims[a] = std::min<std::int32_t>(
+        static_cast<std::int32_t>(std::floor((hi[a] - g.lo[a]) * g.inv_cell)) + 2, (1 << 21) - 1);
+  return g;
+}
+
+// Record numbers in the scratch files carry the kernel-site mark in their top bit.
+constexpr std::uint64_t kSiteBit = std::uint64_t{1} << 63;
 
 struct Plan {
   Grid grid;
@@ -343,6 +396,8 @@ PointCloud own_part(const PointCloud& c, const std::vector<std::uint8_t>& own,
   for (std::size_t k = 0; k < c.size(); ++k)
     if (own[static_cast<std::size_t>(si->values[k])]) keep.push_back(k);
   PointCloud part = select(c, keep);
+  std::erase_if(part.attributes,
+                [](const Attribute& a) { return a.name == detail::kKernelSitesAttribute; });
   Attribute* s = part.find_attribute("source_index");
   for (double& v : s->values) v = static_cast<double>(records[static_cast<std::size_t>(v)]);
   return part;
@@ -683,6 +738,54 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       t.max_tile_points > 0 ? t.max_tile_points : tile_point_limit(t.memory_budget), comm.ranks);
   std::vector<std::uint64_t>().swap(hist);
   st.tiles = plan.tiles.size();
+  // Kernels at every stride-th point of the whole cloud's grid order (kernels.h), not of each
+  // tile's: per cell of the in-memory run's point index, the points in the cells before it in
+  // Morton order (mod stride), and in it those of the lower ranks' records; the distribution
+  // pass then numbers the points of each cell in record order, the index's order within a cell.
+  const std::uint64_t stride = static_cast<std::uint64_t>(std::max(1, gl.kernel_stride));
+  const bool want_sites = stride > 1 && o.scale != ScaleMode::kAdaptive;
+  SiteGrid sg;
+  struct SiteCell {
+    std::uint64_t base = 0, seen = 0;
+  };
+  std::unordered_map<std::uint64_t, SiteCell> site_cells;
+  if (want_sites) {
+    progress("kernel sites", 0);
+    sg = site_grid(gl.box, origin, gl.h);
+    std::unordered_map<std::uint64_t, std::uint64_t> counts;
+    stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
+      for (const auto& p : c.positions) ++counts[sg.code((p - origin).cast<float>())];
+    });
+    std::vector<std::array<std::uint64_t, 2>> mine;  // code, count
+    mine.reserve(counts.size());
+    for (const auto& [code, n] : counts) mine.push_back({code, n});
+    std::unordered_map<std::uint64_t, std::uint64_t>().swap(counts);
+    Bytes msg;
+    msg.put_vec(mine);
+    std::vector<std::array<std::uint64_t, 2>>().swap(mine);
+    const std::vector<std::string> all = allgather(comm, msg.s);
+    msg.s.clear();
+    std::unordered_map<std::uint64_t, std::array<std::uint64_t, 2>> total;  // all, lower ranks
+    for (std::size_t r = 0; r < all.size(); ++r) {
+      Reader rd{all[r]};
+      for (const auto& [code, n] : rd.get_vec<std::array<std::uint64_t, 2>>()) {
+        auto& e = total[code];
+        e[0] += n;
+        if (static_cast<int>(r) < comm.rank) e[1] += n;
+      }
+    }
+    std::vector<std::uint64_t> codes;
+    codes.reserve(total.size());
+    for (const auto& kv : total) codes.push_back(kv.first);
+    std::sort(codes.begin(), codes.end());
+    std::uint64_t before = 0;
+    site_cells.reserve(codes.size());
+    for (std::uint64_t code : codes) {
+      const auto& e = total[code];
+      site_cells[code].base = (before + e[1]) % stride;
+      before += e[0];
+    }
+  }
   progress("distributing", 0);
   {
     const std::size_t T = plan.tiles.size();
@@ -739,8 +842,13 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
               (b.min() - p).cwiseMax(p - b.max()).cwiseMax(Eigen::Vector3d::Zero());
           if (gap.maxCoeff() <= gl.halo) hits.push_back(k);
         }
+        std::uint64_t tagged = rec[i];
+        if (want_sites) {
+          SiteCell& e = site_cells[sg.code((p - origin).cast<float>())];
+          if ((e.base + e.seen++) % stride == 0) tagged |= kSiteBit;
+        }
         for (std::uint32_t k : hits) {
-          put_point(buf[k], c, i, rec[i], cols);
+          put_point(buf[k], c, i, tagged, cols);
           if (buf[k].size() >= flush_at) flush(k);
         }
       }
@@ -756,6 +864,8 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   }
   allgather(comm, {});  // every process's scratch files are complete
   st.seconds_distribute = seconds_since(t_dist);
+
+  decltype(site_cells)().swap(site_cells);
 
   // Pass 5: the tiles of this process, in tile order.
   auto t_tiles = Clock::now();
@@ -778,6 +888,14 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       read_points(scratch_file(t, k, r), cols, c, rec);
       std::error_code ec;
       std::filesystem::remove(scratch_file(t, k, r), ec);
+    }
+    if (want_sites) {
+      std::vector<double> site(rec.size());
+      for (std::size_t i = 0; i < rec.size(); ++i) {
+        site[i] = (rec[i] & kSiteBit) ? 1.0 : 0.0;
+        rec[i] &= ~kSiteBit;
+      }
+      c.set_attribute(detail::kKernelSitesAttribute, AttributeType::kUInt8, std::move(site));
     }
     std::vector<std::uint8_t> own(c.size(), 0);
     std::uint64_t own_n = 0;
