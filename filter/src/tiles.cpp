@@ -17,6 +17,7 @@
 #include "point_set.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/filter/tiled_filter.h"
+#include "select.h"
 #include "tile_scale.h"
 
 namespace scanclean {
@@ -154,9 +155,9 @@ std::uint64_t spread_bits(std::uint64_t v) {
   return v;
 }
 
-// The grid of the point index the in-memory run builds over the whole cloud (cell h x 1.001,
-// float coordinates relative to the box centre, anchored half a cell below their minimum: the
-// arithmetic of NeighborIndex's constructor), so that a point's cell, hence its place in the
+// The grid of the point index the in-memory run's kernels phase uses over the whole cloud (cell
+// given, float coordinates relative to the box centre, anchored half a cell below their minimum:
+// the arithmetic of NeighborIndex's constructor), so that a point's cell, hence its place in the
 // whole cloud's grid order, is known from the first pass's box and h alone.
 struct SiteGrid {
   Eigen::Vector3f lo = Eigen::Vector3f::Zero();
@@ -173,12 +174,11 @@ struct SiteGrid {
   }
 };
 
-SiteGrid site_grid(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& origin, double h) {
+SiteGrid site_grid(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& origin, double cell) {
   SiteGrid g;
   // Rounding is monotonic: the smallest float coordinate is the float of the smallest one.
   const Eigen::Vector3f lo = (box.min() - origin).cast<float>();
   const Eigen::Vector3f hi = (box.max() - origin).cast<float>();
-  double cell = h * 1.001;
   const double max_extent = (hi - lo).cast<double>().maxCoeff();
   constexpr double kMaxCells = (1 << 21) - 2;
   if (max_extent / cell > kMaxCells) cell = max_extent / kMaxCells * (1 + 1e-6);
@@ -541,13 +541,23 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   }
   // Each pass takes the samples still short of K + 1 neighbours (sparse clutter) with a reach
   // three times the last one's; the others keep their distances.
+  // kAuto also takes scale.h's rough estimate r_est, which sizes the in-memory run's first point
+  // index (and so, when it is kept for the kernels, their grid order): the median distance of
+  // the samples to their ks-th nearest among every sub_step-th point.
+  const bool want_est = o.scale == ScaleMode::kAuto;
+  const std::uint64_t kk = static_cast<std::uint64_t>(K) + 1;
+  const std::uint64_t sub_step = std::clamp<std::uint64_t>(gl.points / (8 * kk), 1, 16);
+  const std::size_t ks =
+      static_cast<std::size_t>(std::max<std::uint64_t>(2, (kk + sub_step / 2) / sub_step));
+  std::vector<double> est(want_est ? qf.size() : 0, -1.0);
+  std::vector<std::uint8_t> kth_done(qf.size(), 0);
   bool hist_done = false;
   std::vector<std::uint32_t> active(o.scale != ScaleMode::kFixed ? qf.size() : 0);
   std::iota(active.begin(), active.end(), 0u);
   while (true) {
     const bool need_kth = !active.empty();
     if (hist_done && !need_kth) break;
-    std::vector<std::vector<float>> d2(active.size());
+    std::vector<std::vector<float>> d2(active.size()), d2s(want_est ? active.size() : 0);
     const float R = static_cast<float>(reach);
     std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> near;  // cell -> active slot
     auto key = [&](const Eigen::Vector3f& p, int dx, int dy, int dz) {
@@ -564,8 +574,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx)
             near[key(qf[active[k]], dx, dy, dz)].push_back(static_cast<std::uint32_t>(k));
-    stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
-      for (const auto& p : c.positions) {
+    stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
+      for (std::size_t i = 0; i < c.size(); ++i) {
+        const Eigen::Vector3d& p = c.positions[i];
         if (!hist_done) ++hist[grid.flat(grid.cell_of(p))];
         if (!need_kth) continue;
         const Eigen::Vector3f pf = (p - origin).cast<float>();
@@ -576,7 +587,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
           const Eigen::Vector3f& q = qf[active[k]];
           const float ex = pf.x() - q.x(), ey = pf.y() - q.y(), ez = pf.z() - q.z();
           const float dd = ex * ex + ey * ey + ez * ez;
-          if (dd < R * R) d2[k].push_back(dd);
+          if (!(dd < R * R)) continue;
+          d2[k].push_back(dd);
+          if (want_est && rec[i] % sub_step == 0) d2s[k].push_back(dd);
         }
       }
     });
@@ -585,28 +598,46 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       Bytes mine;
       if (!hist_done) mine.put_vec(hist);
       for (auto& v : d2) mine.put_vec(v);
+      for (auto& v : d2s) mine.put_vec(v);
       std::vector<std::uint64_t> sum(hist_done ? 0 : hist.size(), 0);
-      std::vector<std::vector<float>> joined(d2.size());
+      std::vector<std::vector<float>> joined(d2.size()), joined_s(d2s.size());
       for (const std::string& m : allgather(comm, mine.s)) {
         Reader r{m};
         if (!hist_done) {
           const auto h = r.get_vec<std::uint64_t>();
           for (std::size_t i = 0; i < h.size(); ++i) sum[i] += h[i];
         }
-        for (auto& v : joined) {
-          const auto part = r.get_vec<float>();
-          v.insert(v.end(), part.begin(), part.end());
-        }
+        for (auto* all : {&joined, &joined_s})
+          for (auto& v : *all) {
+            const auto part = r.get_vec<float>();
+            v.insert(v.end(), part.begin(), part.end());
+          }
       }
       if (!hist_done) hist = std::move(sum);
       d2 = std::move(joined);
+      d2s = std::move(joined_s);
     }
     hist_done = true;
     const bool all_within = reach >= 2 * diag + fallback_h;
     std::vector<std::uint32_t> still;
     for (std::size_t k = 0; k < active.size(); ++k) {
-      kth[active[k]] = detail::kth_distance(d2[k], K, R, all_within);
-      if (kth[active[k]] < 0) still.push_back(active[k]);
+      const std::uint32_t a = active[k];
+      if (!kth_done[a]) {
+        kth[a] = detail::kth_distance(d2[k], K, R, all_within);
+        kth_done[a] = kth[a] >= 0;
+      }
+      if (want_est && est[a] < 0) {
+        // As a k-d tree's ks nearest: the ks-th smallest distance, or the largest when fewer.
+        auto& v = d2s[k];
+        if (v.size() >= ks)
+          est[a] = std::sqrt(
+              static_cast<double>(detail::kth_smallest_below(v.data(), v.size(), ks - 1, R * R)));
+        else if (all_within)
+          est[a] = v.empty()
+                       ? 0.0
+                       : std::sqrt(static_cast<double>(*std::max_element(v.begin(), v.end())));
+      }
+      if (!kth_done[a] || (want_est && est[a] < 0)) still.push_back(a);
     }
     active = std::move(still);
     reach = std::min(reach * 3.0, 2 * diag + fallback_h);
@@ -742,6 +773,17 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   // tile's: per cell of the in-memory run's point index, the points in the cells before it in
   // Morton order (mod stride), and in it those of the lower ranks' records; the distribution
   // pass then numbers the points of each cell in record order, the index's order within a cell.
+  // The cell of the in-memory run's kernel-phase point index (scale.h, robust_filter.cpp): the
+  // scale phase's index (cell 1.6 r_est, else 1.001 h0) when its cell lies in [1.001 h, 1.7 h],
+  // else a new one of cell 1.001 h.
+  double site_cell = gl.h * 1.001;
+  if (want_est) {
+    double r_est = detail::median_of(est);
+    if (!(r_est > 0)) r_est = fallback_h;
+    double c1 = r_est * 1.6;
+    if (!(c1 >= gl.h0 * 1.001 && c1 <= gl.h0 * 1.7)) c1 = gl.h0 * 1.001;
+    if (c1 >= gl.h * 1.001 && c1 <= gl.h * 1.7) site_cell = c1;
+  }
   const std::uint64_t stride = static_cast<std::uint64_t>(std::max(1, gl.kernel_stride));
   const bool want_sites = stride > 1 && o.scale != ScaleMode::kAdaptive;
   SiteGrid sg;
@@ -751,7 +793,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   std::unordered_map<std::uint64_t, SiteCell> site_cells;
   if (want_sites) {
     progress("kernel sites", 0);
-    sg = site_grid(gl.box, origin, gl.h);
+    sg = site_grid(gl.box, origin, site_cell);
     std::unordered_map<std::uint64_t, std::uint64_t> counts;
     stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
       for (const auto& p : c.positions) ++counts[sg.code((p - origin).cast<float>())];
