@@ -787,10 +787,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   const std::uint64_t stride = static_cast<std::uint64_t>(std::max(1, gl.kernel_stride));
   const bool want_sites = stride > 1 && o.scale != ScaleMode::kAdaptive;
   SiteGrid sg;
-  struct SiteCell {
-    std::uint64_t base = 0, seen = 0;
-  };
-  std::unordered_map<std::uint64_t, SiteCell> site_cells;
+  // Per occupied cell: {points in it, of which in lower ranks' records} while counting, then
+  // {rank of its first point mod stride (this process's records), points numbered so far}.
+  std::unordered_map<std::uint64_t, std::array<std::uint64_t, 2>> site_cells;
   if (want_sites) {
     progress("kernel sites", 0);
     sg = site_grid(gl.box, origin, site_cell);
@@ -805,27 +804,27 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     Bytes msg;
     msg.put_vec(mine);
     std::vector<std::array<std::uint64_t, 2>>().swap(mine);
-    const std::vector<std::string> all = allgather(comm, msg.s);
-    msg.s.clear();
-    std::unordered_map<std::uint64_t, std::array<std::uint64_t, 2>> total;  // all, lower ranks
+    std::vector<std::string> all = allgather(comm, msg.s);
+    std::string().swap(msg.s);
     for (std::size_t r = 0; r < all.size(); ++r) {
       Reader rd{all[r]};
       for (const auto& [code, n] : rd.get_vec<std::array<std::uint64_t, 2>>()) {
-        auto& e = total[code];
+        auto& e = site_cells[code];
         e[0] += n;
         if (static_cast<int>(r) < comm.rank) e[1] += n;
       }
+      std::string().swap(all[r]);
     }
     std::vector<std::uint64_t> codes;
-    codes.reserve(total.size());
-    for (const auto& kv : total) codes.push_back(kv.first);
+    codes.reserve(site_cells.size());
+    for (const auto& kv : site_cells) codes.push_back(kv.first);
     std::sort(codes.begin(), codes.end());
     std::uint64_t before = 0;
-    site_cells.reserve(codes.size());
     for (std::uint64_t code : codes) {
-      const auto& e = total[code];
-      site_cells[code].base = (before + e[1]) % stride;
-      before += e[0];
+      auto& e = site_cells[code];
+      const std::uint64_t n = e[0];
+      e = {(before + e[1]) % stride, 0};
+      before += n;
     }
   }
   progress("distributing", 0);
@@ -886,8 +885,8 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         }
         std::uint64_t tagged = rec[i];
         if (want_sites) {
-          SiteCell& e = site_cells[sg.code((p - origin).cast<float>())];
-          if ((e.base + e.seen++) % stride == 0) tagged |= kSiteBit;
+          auto& e = site_cells[sg.code((p - origin).cast<float>())];
+          if ((e[0] + e[1]++) % stride == 0) tagged |= kSiteBit;
         }
         for (std::uint32_t k : hits) {
           put_point(buf[k], c, i, tagged, cols);
