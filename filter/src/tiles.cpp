@@ -762,7 +762,8 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   st.seconds_globals = seconds_since(t_start);
   if (t.on_globals) t.on_globals(gl);
 
-  // Pass 4: the tile plan, and every point into the scratch files of its tiles.
+  // The tile plan; pass 4 (kernel stride > 1): the kernel sites; pass 5: every point into the
+  // scratch files of its tiles.
   auto t_dist = Clock::now();
   const Plan plan = make_plan(
       grid, hist, gl.halo,
@@ -908,7 +909,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
 
   decltype(site_cells)().swap(site_cells);
 
-  // Pass 5: the tiles of this process, in tile order.
+  // Pass 6: the tiles of this process, in tile order.
   auto t_tiles = Clock::now();
   FilterOptions to = o;
   to.progress = nullptr;
