@@ -46,8 +46,9 @@ struct KernelParams {
 };
 
 //! The input attribute (0/1 per point) by which the tiled filter names the points that carry a
-//! kernel in the in-memory run of the whole cloud (KernelParams::sites); never in an output.
-inline constexpr const char* kKernelSitesAttribute = "tile_kernel_site";
+//! kernel in the in-memory run of the whole cloud (KernelParams::sites); never in an output. The
+//! name holds spaces, which no PLY or PCD field name can: a file cannot set it.
+inline constexpr const char* kKernelSitesAttribute = "scanclean tile kernel site";
 
 //! How the point index passed to build_kernels numbers the points of d.
 enum class PointIndexIds {
