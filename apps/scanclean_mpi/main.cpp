@@ -2,7 +2,8 @@
 //   mpirun -np N scanclean-mpi IN.ply -o OUT.ply [filter options]
 // Every process reads its own byte range of the input in every pass; the tiles are shared among
 // the processes (largest first, to the least loaded); process 0 writes the one output, the same
-// bytes as `scanclean filter --tiled` with the same options writes, for any N.
+// bytes for any N, and those of `scanclean filter --tiled` with the same options apart from the
+// provenance comment (which names the command).
 
 #include <mpi.h>
 
