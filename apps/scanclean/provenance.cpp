@@ -21,10 +21,10 @@ std::string metres(double v) {
 
 }  // namespace
 
-void set_command_line(int argc, char** argv) {
+void set_command_line(int argc, char** argv, const char* program) {
   std::string line;
   for (int i = 0; i < argc; ++i) {
-    std::string a = i == 0 ? std::string("scanclean") : std::string(argv[i]);
+    std::string a = i == 0 ? std::string(program) : std::string(argv[i]);
     const bool quote = a.empty() || a.find_first_of(" \t'\"") != std::string::npos;
     if (!line.empty()) line += ' ';
     line += quote ? "'" + a + "'" : a;

@@ -12,8 +12,9 @@ namespace scanclean::app {
 //! The program's version, "0.1.0".
 extern const char* const kScancleanVersion;
 
-//! Keeps this run's command line (arguments joined by spaces, quoted when they hold a space).
-void set_command_line(int argc, char** argv);
+//! Keeps this run's command line (arguments joined by spaces, quoted when they hold a space),
+//! the program named `program` (argv[0] is a path).
+void set_command_line(int argc, char** argv, const char* program = "scanclean");
 
 //! The command line kept by set_command_line ("" before).
 const std::string& command_line();

@@ -15,6 +15,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/io/ply_stream_writer.h"
 #include "scanclean/io/point_stream.h"
+#include "scanclean/provenance.h"
 
 namespace scanclean::app {
 
@@ -135,17 +136,25 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
     cloud_layout.confidences = outlier_layout.confidences = s->has_confidences();
     cloud_layout.intensities = outlier_layout.intensities = s->has_intensities();
     cloud_layout.colors = outlier_layout.colors = s->has_colors();
-    cloud_layout.attributes = {
-        {"likelihood", AttributeType::kFloat32},  {"iterations", AttributeType::kUInt8},
-        {"flags", AttributeType::kUInt8},         {"merge_count", AttributeType::kUInt32},
-        {"source_index", AttributeType::kUInt32}, {"displacement", AttributeType::kFloat32}};
-    outlier_layout.attributes = {{"flags", AttributeType::kUInt8},
-                                 {"source_index", AttributeType::kUInt32}};
+    // source_index: uint32 (as the in-memory outputs) while every record number fits, else
+    // double (exact up to 2^53 records; PLY has no 64-bit integer type).
+    const AttributeType index_type =
+        s->size() > 0xffffffffULL ? AttributeType::kFloat64 : AttributeType::kUInt32;
+    cloud_layout.attributes = {{"likelihood", AttributeType::kFloat32},
+                               {"iterations", AttributeType::kUInt8},
+                               {"flags", AttributeType::kUInt8},
+                               {"merge_count", AttributeType::kUInt32},
+                               {"source_index", index_type},
+                               {"displacement", AttributeType::kFloat32}};
+    outlier_layout.attributes = {{"flags", AttributeType::kUInt8}, {"source_index", index_type}};
     if (rank0) {
+      // The same provenance comment as the in-memory run's outputs (h, noise sigma, command).
+      const std::string prov =
+          req.provenance.empty() ? provenance_text(g.h, g.noise_sigma) : req.provenance;
       group = std::make_unique<AtomicCommitGroup>();
-      out = std::make_unique<PlyStreamWriter>(req.output, cloud_layout, req.provenance);
+      out = std::make_unique<PlyStreamWriter>(req.output, cloud_layout, prov);
       if (!req.outliers.empty())
-        outl = std::make_unique<PlyStreamWriter>(req.outliers, outlier_layout, req.provenance);
+        outl = std::make_unique<PlyStreamWriter>(req.outliers, outlier_layout, prov);
     }
   };
   const TileSink sink = [&](std::size_t tile, const PointCloud& c, const PointCloud& o) {

@@ -2,7 +2,8 @@
 //   mpirun -np N scanclean-mpi IN.ply -o OUT.ply [filter options]
 // Every process reads its own byte range of the input in every pass; the tiles are shared among
 // the processes (largest first, to the least loaded); process 0 writes the one output, the same
-// bytes as `scanclean filter --tiled` with the same options writes, for any N.
+// bytes for any N, and those of `scanclean filter --tiled` with the same options apart from the
+// provenance comment (which names the command).
 
 #include <mpi.h>
 
@@ -14,6 +15,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/filter_options_cli.h"
 #include "scanclean/output_checks.h"
+#include "scanclean/provenance.h"
 #include "scanclean/summary.h"
 #include "scanclean/tiled_run.h"
 
@@ -89,6 +91,7 @@ int run(int argc, char** argv, int rank, int ranks) {
     const int rc = rank == 0 ? cli.exit(e) : (e.get_exit_code() == 0 ? 0 : 1);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::kBadOptions);
   }
+  set_command_line(argc, argv, "scanclean-mpi");  // the outputs' provenance comment
   check_input_files("scanclean-mpi", {{"input", input}});
   check_output_files("scanclean-mpi", {{"input", input}},
                      {{"-o", output}, {"--outliers", outliers}});

@@ -17,7 +17,18 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   const std::size_t n = d.p.size();
   const FilterOptions& o = *prm.options;
   const std::size_t stride = std::max<std::size_t>(1, prm.stride);
-  const std::size_t nk = (n + stride - 1) / stride;  // kernel candidates: i = k stride
+  // Kernel candidates: i = k stride, or the given sites (slot[i] = k).
+  std::vector<std::uint32_t> slot;
+  std::size_t nk = (n + stride - 1) / stride;
+  if (prm.sites) {
+    slot.resize(n);
+    nk = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      slot[i] = static_cast<std::uint32_t>(nk);
+      nk += (*prm.sites)[i] ? 1 : 0;
+    }
+  }
+  auto candidate = [&](std::size_t i) { return prm.sites ? slot[i] : i / stride; };
   std::vector<std::uint8_t> valid(nk, 0);
   std::vector<KernelRecord> records(nk);  // candidate order first
   std::vector<KernelFitRecord> fits(prm.keep_fits ? nk : 0);
@@ -32,7 +43,8 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   std::vector<std::uint8_t> refitted(refit.active() ? nk : 0, 0);
   const std::uint64_t cell_key = new_cell_cache_key();
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
-    if (i % stride != 0) return;  // d is in grid order: a spatially even subsample
+    // d is in grid order: a spatially even subsample
+    if (prm.sites ? !(*prm.sites)[i] : i % stride != 0) return;
     const double h = d.hi_at(i);
     const Eigen::Vector3f qi =
         by_slot ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
@@ -54,7 +66,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
       KernelFit again;
       fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, again, &gathered);
       if (refit_own_plane(gathered, d.p[i], h, refit, fit)) {
-        refitted[i / stride] = 1;
+        refitted[candidate(i)] = 1;
         if (!(prm.oriented && d.has_v(i))) fit.n = fit.e.col(0).cast<float>().normalized();
       }
     }
@@ -65,12 +77,13 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     Eigen::Vector3d inv;
     for (int a = 0; a < 3; ++a) inv[a] = 1.0 / std::max(fit.lambda[a], floor2 * h2);
     const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
-    const std::size_t k = i / stride;
+    const std::size_t k = candidate(i);
     records[k].set(fit.c, s_inv, fit.n, h2, d.w_at(i) * static_cast<float>(stride));
     if (prm.keep_fits) fits[k].set(fit.m, fit.weight, fit.cov);
     valid[k] = 1;
   });
   point_index.reset();  // the point index is not needed any more (memory)
+  std::vector<std::uint32_t>().swap(slot);
   KernelSet ks;
   for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
   for (std::uint8_t r : refitted) ks.refitted += r;

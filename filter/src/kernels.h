@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -38,7 +39,16 @@ struct KernelParams {
   std::vector<float>* support = nullptr;
   //! The own-plane refit (plane_refit.h): the cloud's noise sigma (0 = no refit).
   double noise_sigma = 0;
+  //! When set (one per point of d): kernels at the points with a nonzero entry instead of at
+  //! every stride-th, still weighted x stride. The tiled filter passes the whole cloud's
+  //! subsample this way (kKernelSitesAttribute).
+  const std::vector<std::uint8_t>* sites = nullptr;
 };
+
+//! The input attribute (0/1 per point) by which the tiled filter names the points that carry a
+//! kernel in the in-memory run of the whole cloud (KernelParams::sites); never in an output. The
+//! name holds spaces, which no PLY or PCD field name can: a file cannot set it.
+inline constexpr const char* kKernelSitesAttribute = "scanclean tile kernel site";
 
 //! How the point index passed to build_kernels numbers the points of d.
 enum class PointIndexIds {

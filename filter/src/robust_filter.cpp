@@ -246,10 +246,18 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   prm.keep_fits = o.outlier_sigma > 0;
   std::vector<float> support(o.tau > 0 ? N : 0, -1.0f);
   if (!support.empty()) prm.support = &support;
+  std::vector<std::uint8_t> sites;  // the tiled filter's kernel sites (kernels.h), grid order
+  if (const Attribute* a = input.find_attribute(detail::kKernelSitesAttribute)) {
+    sites.resize(N);
+    for (std::size_t s = 0; s < N; ++s) sites[s] = a->values[input_index[s]] != 0 ? 1 : 0;
+    prm.sites = &sites;
+  }
   detail::KernelSet ks =
       detail::build_kernels(d, index, detail::PointIndexIds::kSlots, prm, nref, "kernels");
   prm.keep_fits = false;
   prm.support = nullptr;
+  prm.sites = nullptr;
+  std::vector<std::uint8_t>().swap(sites);
   std::vector<Eigen::Vector3d> x = std::move(d.p);  // projected positions, initially the input
   st.kernels = ks.fitted;
   st.kernels_refitted = ks.refitted;

@@ -5,6 +5,7 @@
 #include <cstdint>
 
 #include "kernel_fit.h"
+#include "noise_scale.h"
 #include "parallel.h"
 #include "scale_selection.h"
 #include "select.h"
@@ -76,57 +77,18 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       sr.h0 = h0;
       if (!(sr.index->cell() >= h0 * 1.001 && sr.index->cell() <= h0 * 1.7))
         sr.index = std::make_unique<NeighborIndex>(pf, h0 * 1.001);
-      // Noise: median sqrt(lambda_3) of the PCA at scale hs over the same sample. At hs below
-      // about 6 sigma the window cuts the noise band and the estimate falls short of sigma
-      // (0.46 sigma at hs = 2.4 sigma, measured), so h = max(h0, noise_factor sigma(h)) is
-      // solved as a fixed point from hs = h0 upwards: hs grows while noise_factor sigma(hs)
-      // exceeds it, and the estimate grows with it.
-      // Over every 4th sampled point of large clouds (2,500 fits per step; the median moves by
-      // about 1 %): each step's radius grows with the noise.
+      // Noise fixed point and scale test (noise_scale.h) over every 4th sampled point of large
+      // clouds (2,500 fits per step; the median moves by about 1 %).
       const std::size_t sig_step = M >= 4000 ? 4 : 1;
-      auto sigma_at = [&](double hs) {
-        std::vector<double> sig(M / sig_step, -1.0);
-        in.h = hs;
-        parallel_each(sig.size(), [&](std::size_t k) {
-          KernelFit fit;
-          const std::size_t i = sample[k * sig_step];
-          if (fit_kernel(
-                  in, i, hs, o.k_min, use_sensor_normals, o.eigen_floor,
-                  [&](auto&& g) {
-                    sr.index->for_each_within(pf[i], static_cast<float>(hs * 1.0001),
-                                              [&](std::uint32_t j, float) { g(j); });
-                  },
-                  fit))
-            sig[k] = std::sqrt(fit.lambda[0]);
-        });
-        sig.erase(std::remove(sig.begin(), sig.end(), -1.0), sig.end());
-        return median_of(sig);
-      };
-      double hs = h0;
-      double sigma = sigma_at(hs);
-      sr.noise_sigma_h0 = sigma;
-      for (int step = 0; step < 8 && o.noise_factor * sigma > hs * 1.02 && hs < diag; ++step) {
-        hs = o.noise_factor * sigma;
-        sigma = sigma_at(hs);
-      }
-      sr.noise_sigma = sigma;
-      h = std::max(h0, o.noise_factor * sr.noise_sigma);
-      sr.h_noise = h;
-      if (o.scale_gamma > 0) {
-        // The scale test (scale_selection.h) over the same sample, on a grid sized for its largest
-        // ball; h is the median radius chosen. The standard errors use the noise estimate
-        // (trimmed, so clutter does not widen the intervals), floored like the kernels'
-        // eigenvalues so that noise-free data keeps h near h_noise.
-        detail::ScaleSelectionOptions so;
-        for (int k = -4; k <= 2; ++k) so.radii.push_back(h * std::pow(2.0, k / 4.0));
-        so.gamma = o.scale_gamma;
-        so.k_min = o.k_min;
-        so.sigma = std::max(sr.noise_sigma, o.eigen_floor * h);
-        const NeighborIndex wide(pf, so.radii.back() * 0.7);
-        std::vector<std::size_t> queries;
-        for (std::size_t k = 0; k < M; k += sig_step) queries.push_back(sample[k]);
-        h = median_of(detail::select_scale(in.p, wide, queries, so));
-      }
+      std::vector<std::size_t> sig_samples, queries;
+      for (std::size_t k = 0; k < M / sig_step; ++k) sig_samples.push_back(sample[k * sig_step]);
+      for (std::size_t k = 0; k < M; k += sig_step) queries.push_back(sample[k]);
+      const NoiseScale ns =
+          noise_scale(in, pf, *sr.index, sig_samples, queries, h0, diag, use_sensor_normals, o);
+      sr.noise_sigma_h0 = ns.noise_sigma_h0;
+      sr.noise_sigma = ns.noise_sigma;
+      sr.h_noise = ns.h_noise;
+      h = ns.h;
       if (!(sr.index->cell() >= h * 1.001 && sr.index->cell() <= h * 1.7)) sr.index.reset();
     } else {
       std::vector<float> hi(N);

@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <vector>
 
+#include "noise_scale.h"
 #include "point_set.h"
 #include "scanclean/filter/filter_options.h"
 
@@ -19,16 +20,17 @@ namespace scanclean::detail {
 //! largest distance, as scale.h does for clouds of at most K points.
 double kth_distance(std::vector<float>& d2, int K, float reach, bool all);
 
-struct TileScale {
-  double h = 0, noise_sigma = 0, noise_sigma_h0 = 0, h_noise = 0;
-  double reach = 0;  //!< the largest query radius used: the gathered points must cover it
-};
+//! The automatic h from the gathered neighbourhoods (noise_scale.h; reach: the largest query
+//! radius used around a sample, which the gathered points must cover).
+using TileScale = NoiseScale;
 
-//! The noise fixed point and the scale test (scale.h) on the gathered points `g` (positions
-//! relative to the cloud's origin, sensor normals and weights; every point within the reach of
-//! every sample in `samples`, which index g). `every4`: the samples are every 4th of the
-//! cloud's (scale.h's step at 4,000 samples and more); `diag`: the cloud's bounding-box diagonal.
-TileScale scale_from_neighbourhoods(PointSet& g, const std::vector<std::size_t>& samples, double h0,
+//! The noise fixed point over `sigma_samples` and the scale test over `test_samples`
+//! (noise_scale.h) on the gathered points `g` (positions relative to the cloud's origin, sensor
+//! normals and weights; every point within the reach of every sample, which index g): the same
+//! function and the same samples as the in-memory scale phase (scale.h); `diag`: the cloud's
+//! bounding-box diagonal.
+TileScale scale_from_neighbourhoods(PointSet& g, const std::vector<std::size_t>& sigma_samples,
+                                    const std::vector<std::size_t>& test_samples, double h0,
                                     double diag, bool use_sensor_normals, const FilterOptions& o);
 
 }  // namespace scanclean::detail

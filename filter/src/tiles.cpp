@@ -11,11 +11,13 @@
 #include <unordered_map>
 #include <vector>
 
+#include "kernels.h"
 #include "neighbor_index.h"
 #include "parallel.h"
 #include "point_set.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/filter/tiled_filter.h"
+#include "select.h"
 #include "tile_scale.h"
 
 namespace scanclean {
@@ -139,6 +141,57 @@ Grid make_grid(const Eigen::AlignedBox3d& box) {
     g.dims[a] = std::max<std::int64_t>(1, static_cast<std::int64_t>(std::ceil(ext[a] / g.cell)));
   return g;
 }
+
+// ---- the in-memory run's kernel subsample (kernels.h: every stride-th point in grid order) ----
+
+// The Morton code of neighbor_index.cpp: the low 21 bits of x, y and z interleaved.
+std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+
+// The grid of the point index the in-memory run's kernels phase uses over the whole cloud (cell
+// given, float coordinates relative to the box centre, anchored half a cell below their minimum:
+// the arithmetic of NeighborIndex's constructor), so that a point's cell, hence its place in the
+// whole cloud's grid order, is known from the first pass's box and h alone.
+struct SiteGrid {
+  Eigen::Vector3f lo = Eigen::Vector3f::Zero();
+  float inv_cell = 1;
+  std::int32_t dims[3] = {1, 1, 1};
+  std::uint64_t code(const Eigen::Vector3f& p) const {
+    std::uint64_t c[3];
+    for (int a = 0; a < 3; ++a) {
+      const float f = std::floor((p[a] - lo[a]) * inv_cell);
+      c[a] = static_cast<std::uint64_t>(
+          static_cast<std::int32_t>(std::clamp(f, 0.0f, static_cast<float>(dims[a] - 1))));
+    }
+    return spread_bits(c[0]) | (spread_bits(c[1]) << 1) | (spread_bits(c[2]) << 2);
+  }
+};
+
+SiteGrid site_grid(const Eigen::AlignedBox3d& box, const Eigen::Vector3d& origin, double cell) {
+  SiteGrid g;
+  // Rounding is monotonic: the smallest float coordinate is the float of the smallest one.
+  const Eigen::Vector3f lo = (box.min() - origin).cast<float>();
+  const Eigen::Vector3f hi = (box.max() - origin).cast<float>();
+  const double max_extent = (hi - lo).cast<double>().maxCoeff();
+  constexpr double kMaxCells = (1 << 21) - 2;
+  if (max_extent / cell > kMaxCells) cell = max_extent / kMaxCells * (1 + 1e-6);
+  g.lo = lo - Eigen::Vector3f::Constant(static_cast<float>(cell) * 0.5f);
+  g.inv_cell = static_cast<float>(1.0 / cell);
+  for (int a = 0; a < 3; ++a)
+    g.dims[a] = std::min<std::int32_t>(
+        static_cast<std::int32_t>(std::floor((hi[a] - g.lo[a]) * g.inv_cell)) + 2, (1 << 21) - 1);
+  return g;
+}
+
+// Record numbers in the scratch files carry the kernel-site mark in their top bit.
+constexpr std::uint64_t kSiteBit = std::uint64_t{1} << 63;
 
 struct Plan {
   Grid grid;
@@ -343,6 +396,8 @@ PointCloud own_part(const PointCloud& c, const std::vector<std::uint8_t>& own,
   for (std::size_t k = 0; k < c.size(); ++k)
     if (own[static_cast<std::size_t>(si->values[k])]) keep.push_back(k);
   PointCloud part = select(c, keep);
+  std::erase_if(part.attributes,
+                [](const Attribute& a) { return a.name == detail::kKernelSitesAttribute; });
   Attribute* s = part.find_attribute("source_index");
   for (double& v : s->values) v = static_cast<double>(records[static_cast<std::size_t>(v)]);
   return part;
@@ -486,13 +541,23 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   }
   // Each pass takes the samples still short of K + 1 neighbours (sparse clutter) with a reach
   // three times the last one's; the others keep their distances.
+  // kAuto also takes scale.h's rough estimate r_est, which sizes the in-memory run's first point
+  // index (and so, when it is kept for the kernels, their grid order): the median distance of
+  // the samples to their ks-th nearest among every sub_step-th point.
+  const bool want_est = o.scale == ScaleMode::kAuto;
+  const std::uint64_t kk = static_cast<std::uint64_t>(K) + 1;
+  const std::uint64_t sub_step = std::clamp<std::uint64_t>(gl.points / (8 * kk), 1, 16);
+  const std::size_t ks =
+      static_cast<std::size_t>(std::max<std::uint64_t>(2, (kk + sub_step / 2) / sub_step));
+  std::vector<double> est(want_est ? qf.size() : 0, -1.0);
+  std::vector<std::uint8_t> kth_done(qf.size(), 0);
   bool hist_done = false;
   std::vector<std::uint32_t> active(o.scale != ScaleMode::kFixed ? qf.size() : 0);
   std::iota(active.begin(), active.end(), 0u);
   while (true) {
     const bool need_kth = !active.empty();
     if (hist_done && !need_kth) break;
-    std::vector<std::vector<float>> d2(active.size());
+    std::vector<std::vector<float>> d2(active.size()), d2s(want_est ? active.size() : 0);
     const float R = static_cast<float>(reach);
     std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> near;  // cell -> active slot
     auto key = [&](const Eigen::Vector3f& p, int dx, int dy, int dz) {
@@ -509,8 +574,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx)
             near[key(qf[active[k]], dx, dy, dz)].push_back(static_cast<std::uint32_t>(k));
-    stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
-      for (const auto& p : c.positions) {
+    stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
+      for (std::size_t i = 0; i < c.size(); ++i) {
+        const Eigen::Vector3d& p = c.positions[i];
         if (!hist_done) ++hist[grid.flat(grid.cell_of(p))];
         if (!need_kth) continue;
         const Eigen::Vector3f pf = (p - origin).cast<float>();
@@ -521,7 +587,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
           const Eigen::Vector3f& q = qf[active[k]];
           const float ex = pf.x() - q.x(), ey = pf.y() - q.y(), ez = pf.z() - q.z();
           const float dd = ex * ex + ey * ey + ez * ez;
-          if (dd < R * R) d2[k].push_back(dd);
+          if (!(dd < R * R)) continue;
+          d2[k].push_back(dd);
+          if (want_est && rec[i] % sub_step == 0) d2s[k].push_back(dd);
         }
       }
     });
@@ -530,28 +598,46 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       Bytes mine;
       if (!hist_done) mine.put_vec(hist);
       for (auto& v : d2) mine.put_vec(v);
+      for (auto& v : d2s) mine.put_vec(v);
       std::vector<std::uint64_t> sum(hist_done ? 0 : hist.size(), 0);
-      std::vector<std::vector<float>> joined(d2.size());
+      std::vector<std::vector<float>> joined(d2.size()), joined_s(d2s.size());
       for (const std::string& m : allgather(comm, mine.s)) {
         Reader r{m};
         if (!hist_done) {
           const auto h = r.get_vec<std::uint64_t>();
           for (std::size_t i = 0; i < h.size(); ++i) sum[i] += h[i];
         }
-        for (auto& v : joined) {
-          const auto part = r.get_vec<float>();
-          v.insert(v.end(), part.begin(), part.end());
-        }
+        for (auto* all : {&joined, &joined_s})
+          for (auto& v : *all) {
+            const auto part = r.get_vec<float>();
+            v.insert(v.end(), part.begin(), part.end());
+          }
       }
       if (!hist_done) hist = std::move(sum);
       d2 = std::move(joined);
+      d2s = std::move(joined_s);
     }
     hist_done = true;
     const bool all_within = reach >= 2 * diag + fallback_h;
     std::vector<std::uint32_t> still;
     for (std::size_t k = 0; k < active.size(); ++k) {
-      kth[active[k]] = detail::kth_distance(d2[k], K, R, all_within);
-      if (kth[active[k]] < 0) still.push_back(active[k]);
+      const std::uint32_t a = active[k];
+      if (!kth_done[a]) {
+        kth[a] = detail::kth_distance(d2[k], K, R, all_within);
+        kth_done[a] = kth[a] >= 0;
+      }
+      if (want_est && est[a] < 0) {
+        // As a k-d tree's ks nearest: the ks-th smallest distance, or the largest when fewer.
+        auto& v = d2s[k];
+        if (v.size() >= ks)
+          est[a] = std::sqrt(
+              static_cast<double>(detail::kth_smallest_below(v.data(), v.size(), ks - 1, R * R)));
+        else if (all_within)
+          est[a] = v.empty()
+                       ? 0.0
+                       : std::sqrt(static_cast<double>(*std::max_element(v.begin(), v.end())));
+      }
+      if (!kth_done[a] || (want_est && est[a] < 0)) still.push_back(a);
     }
     active = std::move(still);
     reach = std::min(reach * 3.0, 2 * diag + fallback_h);
@@ -634,8 +720,11 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
           in_g.push_back(nn.empty() ? 0 : nn[0].second);
         }
       }
+      // As scale.h: the noise over the first M / step of them, the scale test over all.
+      const std::vector<std::size_t> in_g_sigma(
+          in_g.begin(), in_g.begin() + static_cast<std::ptrdiff_t>(qf.size() / step));
       const detail::TileScale ts =
-          detail::scale_from_neighbourhoods(g, in_g, gl.h0, diag, use_v, o);
+          detail::scale_from_neighbourhoods(g, in_g_sigma, in_g, gl.h0, diag, use_v, o);
       if (ts.reach <= R || R >= 2 * diag + fallback_h) {
         gl.h = ts.h;
         gl.noise_sigma = ts.noise_sigma;
@@ -673,13 +762,72 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   st.seconds_globals = seconds_since(t_start);
   if (t.on_globals) t.on_globals(gl);
 
-  // Pass 4: the tile plan, and every point into the scratch files of its tiles.
+  // The tile plan; pass 4 (kernel stride > 1): the kernel sites; pass 5: every point into the
+  // scratch files of its tiles.
   auto t_dist = Clock::now();
   const Plan plan = make_plan(
       grid, hist, gl.halo,
       t.max_tile_points > 0 ? t.max_tile_points : tile_point_limit(t.memory_budget), comm.ranks);
   std::vector<std::uint64_t>().swap(hist);
   st.tiles = plan.tiles.size();
+  // Kernels at every stride-th point of the whole cloud's grid order (kernels.h), not of each
+  // tile's: per cell of the in-memory run's point index, the points in the cells before it in
+  // Morton order (mod stride), and in it those of the lower ranks' records; the distribution
+  // pass then numbers the points of each cell in record order, the index's order within a cell.
+  // The cell of the in-memory run's kernel-phase point index (scale.h, robust_filter.cpp): the
+  // scale phase's index (cell 1.6 r_est, else 1.001 h0) when its cell lies in [1.001 h, 1.7 h],
+  // else a new one of cell 1.001 h.
+  double site_cell = gl.h * 1.001;
+  if (want_est) {
+    double r_est = detail::median_of(est);
+    if (!(r_est > 0)) r_est = fallback_h;
+    double c1 = r_est * 1.6;
+    if (!(c1 >= gl.h0 * 1.001 && c1 <= gl.h0 * 1.7)) c1 = gl.h0 * 1.001;
+    if (c1 >= gl.h * 1.001 && c1 <= gl.h * 1.7) site_cell = c1;
+  }
+  const std::uint64_t stride = static_cast<std::uint64_t>(std::max(1, gl.kernel_stride));
+  const bool want_sites = stride > 1 && o.scale != ScaleMode::kAdaptive;
+  SiteGrid sg;
+  // Per occupied cell: {points in it, of which in lower ranks' records} while counting, then
+  // {rank of its first point mod stride (this process's records), points numbered so far}.
+  std::unordered_map<std::uint64_t, std::array<std::uint64_t, 2>> site_cells;
+  if (want_sites) {
+    progress("kernel sites", 0);
+    sg = site_grid(gl.box, origin, site_cell);
+    std::unordered_map<std::uint64_t, std::uint64_t> counts;
+    stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
+      for (const auto& p : c.positions) ++counts[sg.code((p - origin).cast<float>())];
+    });
+    std::vector<std::array<std::uint64_t, 2>> mine;  // code, count
+    mine.reserve(counts.size());
+    for (const auto& [code, n] : counts) mine.push_back({code, n});
+    std::unordered_map<std::uint64_t, std::uint64_t>().swap(counts);
+    Bytes msg;
+    msg.put_vec(mine);
+    std::vector<std::array<std::uint64_t, 2>>().swap(mine);
+    std::vector<std::string> all = allgather(comm, msg.s);
+    std::string().swap(msg.s);
+    for (std::size_t r = 0; r < all.size(); ++r) {
+      Reader rd{all[r]};
+      for (const auto& [code, n] : rd.get_vec<std::array<std::uint64_t, 2>>()) {
+        auto& e = site_cells[code];
+        e[0] += n;
+        if (static_cast<int>(r) < comm.rank) e[1] += n;
+      }
+      std::string().swap(all[r]);
+    }
+    std::vector<std::uint64_t> codes;
+    codes.reserve(site_cells.size());
+    for (const auto& kv : site_cells) codes.push_back(kv.first);
+    std::sort(codes.begin(), codes.end());
+    std::uint64_t before = 0;
+    for (std::uint64_t code : codes) {
+      auto& e = site_cells[code];
+      const std::uint64_t n = e[0];
+      e = {(before + e[1]) % stride, 0};
+      before += n;
+    }
+  }
   progress("distributing", 0);
   {
     const std::size_t T = plan.tiles.size();
@@ -736,8 +884,13 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
               (b.min() - p).cwiseMax(p - b.max()).cwiseMax(Eigen::Vector3d::Zero());
           if (gap.maxCoeff() <= gl.halo) hits.push_back(k);
         }
+        std::uint64_t tagged = rec[i];
+        if (want_sites) {
+          auto& e = site_cells[sg.code((p - origin).cast<float>())];
+          if ((e[0] + e[1]++) % stride == 0) tagged |= kSiteBit;
+        }
         for (std::uint32_t k : hits) {
-          put_point(buf[k], c, i, rec[i], cols);
+          put_point(buf[k], c, i, tagged, cols);
           if (buf[k].size() >= flush_at) flush(k);
         }
       }
@@ -754,7 +907,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   allgather(comm, {});  // every process's scratch files are complete
   st.seconds_distribute = seconds_since(t_dist);
 
-  // Pass 5: the tiles of this process, in tile order.
+  decltype(site_cells)().swap(site_cells);
+
+  // Pass 6: the tiles of this process, in tile order.
   auto t_tiles = Clock::now();
   FilterOptions to = o;
   to.progress = nullptr;
@@ -775,6 +930,14 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       read_points(scratch_file(t, k, r), cols, c, rec);
       std::error_code ec;
       std::filesystem::remove(scratch_file(t, k, r), ec);
+    }
+    if (want_sites) {
+      std::vector<double> site(rec.size());
+      for (std::size_t i = 0; i < rec.size(); ++i) {
+        site[i] = (rec[i] & kSiteBit) ? 1.0 : 0.0;
+        rec[i] &= ~kSiteBit;
+      }
+      c.set_attribute(detail::kKernelSitesAttribute, AttributeType::kUInt8, std::move(site));
     }
     std::vector<std::uint8_t> own(c.size(), 0);
     std::uint64_t own_n = 0;

@@ -77,7 +77,7 @@ PlyStreamWriter::~PlyStreamWriter() = default;
 
 std::string PlyStreamWriter::header(std::uint64_t count) const {
   std::string h = "ply\nformat binary_little_endian 1.0\n";
-  h += "comment written by scanclean (units: metres)\n";
+  h += "comment written by scanclean " SCANCLEAN_VERSION " (units: metres)\n";
   if (!provenance_.empty()) h += "comment " + io_detail::header_comment_text(provenance_) + "\n";
   // The count, then a comment that pads the header to the same size for any count.
   const std::string digits = std::to_string(count);

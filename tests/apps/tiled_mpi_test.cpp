@@ -19,6 +19,18 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// The PLY bytes without the provenance comment line ("comment h=... command: ..."), which names
+// each run's own command line; fails the test when that line is missing.
+std::string without_provenance(const std::string& ply) {
+  const std::size_t at = ply.find("\ncomment h=");
+  EXPECT_NE(at, std::string::npos) << "no provenance comment with h";
+  if (at == std::string::npos) return ply;
+  const std::size_t end = ply.find('\n', at + 1);
+  EXPECT_NE(ply.find("command: ", at), std::string::npos);
+  EXPECT_LT(ply.find("command: ", at), end);
+  return ply.substr(0, at) + ply.substr(end);
+}
+
 class TiledProgram : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -42,6 +54,11 @@ TEST_F(TiledProgram, FilterTiledWritesEveryPointOnceAcrossTiles) {
       dir_, 300);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE(r.out.find("tiled, out of core"), std::string::npos) << r.out;
+  // The provenance comment of the in-memory outputs: h, noise sigma and the command line.
+  const std::string header = test::slurp(dir_ / "out.ply").substr(0, 2048);
+  EXPECT_NE(header.find("\ncomment h="), std::string::npos) << header;
+  EXPECT_NE(header.find("noise_sigma="), std::string::npos) << header;
+  EXPECT_NE(header.find("command: scanclean filter"), std::string::npos) << header;
   const PointCloud out = read_ply(dir_ / "out.ply");
   const PointCloud removed = read_ply(dir_ / "removed.ply");
   ASSERT_GT(out.size(), 50000u);
@@ -80,8 +97,8 @@ TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
        (dir_ / "one_removed.ply").string(), "--tiled", "--memory-budget", "64M"},
       dir_, 300);
   ASSERT_EQ(one.exit_code, 0) << one.err;
-  const std::string expected = test::slurp(dir_ / "one.ply");
-  const std::string expected_removed = test::slurp(dir_ / "one_removed.ply");
+  const std::string expected = without_provenance(test::slurp(dir_ / "one.ply"));
+  const std::string expected_removed = without_provenance(test::slurp(dir_ / "one_removed.ply"));
   ASSERT_FALSE(expected.empty());
   for (const std::vector<std::string>& np :
        {std::vector<std::string>{"-np", "2"},
@@ -98,8 +115,10 @@ TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
     const auto r = test::run_program(SCANCLEAN_MPIRUN, args, dir_, 300);
     ASSERT_EQ(r.exit_code, 0) << "mpirun " << np[1] << " processes:\n" << r.out << r.err;
     EXPECT_NE(r.out.find("processes:"), std::string::npos) << r.out;
-    EXPECT_TRUE(test::slurp(out) == expected) << np[1] << " processes: output differs";
-    EXPECT_TRUE(test::slurp(removed) == expected_removed) << np[1] << " processes: outliers differ";
+    EXPECT_TRUE(without_provenance(test::slurp(out)) == expected)
+        << np[1] << " processes: output differs";
+    EXPECT_TRUE(without_provenance(test::slurp(removed)) == expected_removed)
+        << np[1] << " processes: outliers differ";
   }
 }
 #else

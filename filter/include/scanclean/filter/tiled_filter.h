@@ -7,25 +7,34 @@
 //!  1. the bounding box, the point count and the sample of the automatic h (the records
 //!     k N / 10,000, as robust_filter samples them);
 //!  2. a coarse occupancy histogram over the box, and the squared distances from every sample to
-//!     its neighbours (the K_h-th neighbour distance h0 exactly as robust_filter computes it);
+//!     its neighbours (the K_h-th neighbour distance h0 exactly as robust_filter computes it, and
+//!     its first rough estimate r_est, which sizes robust_filter's first point index);
 //!  3. the neighbourhoods of every 4th sample, from which the noise estimate and the scale test
-//!     run as in robust_filter, giving h for the whole cloud (repeated with a wider radius if the
-//!     first did not reach far enough);
-//!  4. the points are sorted into tiles: boxes cut from the histogram so that each tile, with a
+//!     run as in robust_filter (the same function, noise_scale.h), giving h for the whole cloud
+//!     (repeated with a wider radius if the first did not reach far enough);
+//!  4. (kernel stride > 1) the points per cell of the grid robust_filter's kernel phase uses on
+//!     the whole cloud, so that every point's place in the whole cloud's grid order, hence
+//!     whether it carries a kernel, is known (exchanged between the processes);
+//!  5. the points are sorted into tiles: boxes cut from the histogram so that each tile, with a
 //!     halo of halo_factor x h on every side, holds at most the points the memory budget allows;
-//!     each point goes to a scratch file of its own tile and of every tile whose halo holds it;
-//!  5. each tile (its points in input order, halo included) is filtered with the global choices
-//!     of pass 3 (h, kernel stride, merging distance, minimum component size), and the output
-//!     points and outliers whose seed lies in the tile's own box are handed to the sink.
+//!     each point goes, marked as kernel site or not, to a scratch file of its own tile and of
+//!     every tile whose halo holds it;
+//!  6. each tile (its points in input order, halo included) is filtered with the global choices
+//!     of pass 3 (h, kernel stride, merging distance, minimum component size) and the kernel
+//!     sites of pass 4, and the output points and outliers whose seed lies in the tile's own box
+//!     are handed to the sink.
 //! Tiles are planned from global data only and each is filtered alone, deterministically, so the
 //! result does not depend on the number of processes or threads.
 //!
-//! Against robust_filter on the whole cloud: h0 is bit-identical; the noise estimate and the
-//! scale test sum the same neighbours in another order (differences of a few ulps in h). Within
-//! a tile, the grids are anchored at the tile's own points, so sums run in another order, the
-//! kernel stride's subsample (every stride-th point in grid order) is another one, the density
-//! medians (tau) are the tile's, and clusters at tile borders are seeded on each side. The tests
-//! and the scaling benchmark report the differences (count and largest distance).
+//! Against robust_filter on the whole cloud: h0 and the kernel sites are the same; the noise
+//! estimate and the scale test sum the same neighbours in another order (differences of a few
+//! ulps in h). Within a tile, the grids are anchored at the tile's own points, so sums run in
+//! another order (positions differ in the last bits), the density test's thinning of the output
+//! points (every stride-th in their grid order) and its medians (tau) are the tile's, and
+//! clusters at tile borders are seeded on each side: a few density decisions near the threshold
+//! differ (docs/SCALING.md). Coincident copies and far points (robust_filter filters them apart)
+//! shift the kernel sites. The tests and the scaling benchmark report the differences (count and
+//! largest distance).
 
 #include <Eigen/Geometry>
 #include <cstddef>

@@ -1,0 +1,70 @@
+#include "noise_scale.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "kernel_fit.h"
+#include "parallel.h"
+#include "scale_selection.h"
+#include "select.h"
+
+namespace scanclean::detail {
+
+NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
+                       const NeighborIndex& index, const std::vector<std::size_t>& sigma_samples,
+                       const std::vector<std::size_t>& test_samples, double h0, double diag,
+                       bool use_sensor_normals, const FilterOptions& o) {
+  NoiseScale ns;
+  // Noise: median sqrt(lambda_3) of the PCA at scale hs over the samples. At hs below about
+  // 6 sigma the window cuts the noise band and the estimate falls short of sigma (0.46 sigma at
+  // hs = 2.4 sigma, measured), so h = max(h0, noise_factor sigma(h)) is solved as a fixed point
+  // from hs = h0 upwards: hs grows while noise_factor sigma(hs) exceeds it, and the estimate
+  // grows with it.
+  auto sigma_at = [&](double hs) {
+    ns.reach = std::max(ns.reach, hs * 1.0001);
+    std::vector<double> sig(sigma_samples.size(), -1.0);
+    in.h = hs;
+    parallel_each(sig.size(), [&](std::size_t k) {
+      KernelFit fit;
+      const std::size_t i = sigma_samples[k];
+      if (fit_kernel(
+              in, i, hs, o.k_min, use_sensor_normals, o.eigen_floor,
+              [&](auto&& g) {
+                index.for_each_within(pf[i], static_cast<float>(hs * 1.0001),
+                                      [&](std::uint32_t j, float) { g(j); });
+              },
+              fit))
+        sig[k] = std::sqrt(fit.lambda[0]);
+    });
+    sig.erase(std::remove(sig.begin(), sig.end(), -1.0), sig.end());
+    return median_of(sig);
+  };
+  double hs = h0;
+  double sigma = sigma_at(hs);
+  ns.noise_sigma_h0 = sigma;
+  for (int step = 0; step < 8 && o.noise_factor * sigma > hs * 1.02 && hs < diag; ++step) {
+    hs = o.noise_factor * sigma;
+    sigma = sigma_at(hs);
+  }
+  ns.noise_sigma = sigma;
+  double h = std::max(h0, o.noise_factor * ns.noise_sigma);
+  ns.h_noise = h;
+  if (o.scale_gamma > 0) {
+    // The scale test (scale_selection.h) over the samples, on a grid sized for its largest
+    // ball; h is the median radius chosen. The standard errors use the noise estimate
+    // (trimmed, so clutter does not widen the intervals), floored like the kernels'
+    // eigenvalues so that noise-free data keeps h near h_noise.
+    ScaleSelectionOptions so;
+    for (int k = -4; k <= 2; ++k) so.radii.push_back(h * std::pow(2.0, k / 4.0));
+    so.gamma = o.scale_gamma;
+    so.k_min = o.k_min;
+    so.sigma = std::max(ns.noise_sigma, o.eigen_floor * h);
+    ns.reach = std::max(ns.reach, so.radii.back() * 1.0001);
+    const NeighborIndex wide(pf, so.radii.back() * 0.7);
+    h = median_of(select_scale(in.p, wide, test_samples, so));
+  }
+  ns.h = h;
+  return ns;
+}
+
+}  // namespace scanclean::detail
