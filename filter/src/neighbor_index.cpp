@@ -13,6 +13,12 @@
 namespace scanclean {
 namespace {
 
+std::uint64_t hash_of(std::uint64_t key) {
+  return key * 0x9E3779B97F4A7C15ULL;
+}
+
+constexpr std::uint64_t kEmpty = ~0ULL;
+
 // Spreads the low 21 bits of v so that there are two zero bits between consecutive bits.
 std::uint64_t spread_bits(std::uint64_t v) {
   v &= 0x1fffff;
@@ -24,19 +30,13 @@ std::uint64_t spread_bits(std::uint64_t v) {
   return v;
 }
 
+}  // namespace
+
 std::uint64_t morton(std::int32_t x, std::int32_t y, std::int32_t z) {
   return spread_bits(static_cast<std::uint64_t>(x)) |
          (spread_bits(static_cast<std::uint64_t>(y)) << 1) |
          (spread_bits(static_cast<std::uint64_t>(z)) << 2);
 }
-
-std::uint64_t hash_of(std::uint64_t key) {
-  return key * 0x9E3779B97F4A7C15ULL;
-}
-
-constexpr std::uint64_t kEmpty = ~0ULL;
-
-}  // namespace
 
 struct NeighborIndex::Tree {
   struct Adaptor {

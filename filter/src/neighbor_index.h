@@ -128,6 +128,10 @@ class NeighborIndex {
   mutable std::unique_ptr<Tree> tree_;
 };
 
+//! The index's order of cells: the Morton code of a cell's coordinates (the low 21 bits of x, y
+//! and z interleaved). The tiled filter numbers points in this order too (tiles.cpp).
+std::uint64_t morton(std::int32_t x, std::int32_t y, std::int32_t z);
+
 namespace detail {
 inline std::uint64_t cell_key(std::int32_t x, std::int32_t y, std::int32_t z) {
   return static_cast<std::uint64_t>(x) | (static_cast<std::uint64_t>(y) << 21) |
@@ -140,24 +144,14 @@ void NeighborIndex::visit(const Eigen::Vector3f& q, float r, F& f) const {
   if (pts_.empty() || !(r > 0)) return;
   const float r2 = r * r;
   std::int32_t lo[3], hi[3];
-  if (grid_ && r <= cell_f_) {
-    // Fast path: every point within r lies in the 27 cells around q's cell, whose occupied
-    // members are precomputed per cell.
-    std::int32_t c3[3];
-    bool inside = true;
-    for (int a = 0; a < 3; ++a) {
-      const float c = std::floor((q[a] - lo_[a]) * inv_cell_);
-      inside = inside && c >= 0 && c <= static_cast<float>(dims_[a] - 1);
-      c3[a] = inside ? static_cast<std::int32_t>(c) : 0;
+  // Fast path: every point within r lies in the 27 cells around q's cell, whose occupied
+  // members are precomputed per cell.
+  if (const std::int64_t cq = adjacent_cell(q, r); cq >= 0) {
+    for (std::uint32_t k = adj_begin_[cq], ke = adj_begin_[cq + 1]; k < ke; ++k) {
+      const std::uint32_t c = adj_[k];
+      scan<kSlots>(cell_begin_[c], cell_begin_[c + 1], q, r2, f);
     }
-    const std::int64_t cq = inside ? find_cell(detail::cell_key(c3[0], c3[1], c3[2])) : -1;
-    if (cq >= 0) {
-      for (std::uint32_t k = adj_begin_[cq], ke = adj_begin_[cq + 1]; k < ke; ++k) {
-        const std::uint32_t c = adj_[k];
-        scan<kSlots>(cell_begin_[c], cell_begin_[c + 1], q, r2, f);
-      }
-      return;
-    }
+    return;
   }
   bool grid = grid_;
   for (int a = 0; a < 3 && grid; ++a) {

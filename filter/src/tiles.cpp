@@ -144,17 +144,6 @@ Grid make_grid(const Eigen::AlignedBox3d& box) {
 
 // ---- the in-memory run's kernel subsample (kernels.h: every stride-th point in grid order) ----
 
-// The Morton code of neighbor_index.cpp: the low 21 bits of x, y and z interleaved.
-std::uint64_t spread_bits(std::uint64_t v) {
-  v &= 0x1fffff;
-  v = (v | v << 32) & 0x1f00000000ffffULL;
-  v = (v | v << 16) & 0x1f0000ff0000ffULL;
-  v = (v | v << 8) & 0x100f00f00f00f00fULL;
-  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-  v = (v | v << 2) & 0x1249249249249249ULL;
-  return v;
-}
-
 // The grid of the point index the in-memory run's kernels phase uses over the whole cloud (cell
 // given, float coordinates relative to the box centre, anchored half a cell below their minimum:
 // the arithmetic of NeighborIndex's constructor), so that a point's cell, hence its place in the
@@ -164,13 +153,12 @@ struct SiteGrid {
   float inv_cell = 1;
   std::int32_t dims[3] = {1, 1, 1};
   std::uint64_t code(const Eigen::Vector3f& p) const {
-    std::uint64_t c[3];
+    std::int32_t c[3];
     for (int a = 0; a < 3; ++a) {
       const float f = std::floor((p[a] - lo[a]) * inv_cell);
-      c[a] = static_cast<std::uint64_t>(
-          static_cast<std::int32_t>(std::clamp(f, 0.0f, static_cast<float>(dims[a] - 1))));
+      c[a] = static_cast<std::int32_t>(std::clamp(f, 0.0f, static_cast<float>(dims[a] - 1)));
     }
-    return spread_bits(c[0]) | (spread_bits(c[1]) << 1) | (spread_bits(c[2]) << 2);
+    return morton(c[0], c[1], c[2]);  // the index's own cell order
   }
 };
 
@@ -437,6 +425,8 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   TiledStats st;
   TiledGlobals& gl = st.globals;
   const auto [rb, re] = my_range(src.records, comm);
+  // Named for the lambdas below: clang before 16 cannot capture a structured binding.
+  const std::uint64_t my_records = re - rb + 1;
   const std::size_t chunk = t.chunk_records;
   const int K = o.scale == ScaleMode::kAdaptive ? o.k_adaptive : o.k_h;
 
@@ -895,7 +885,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         }
       }
       done += c.size();
-      progress("distributing", static_cast<double>(done) / static_cast<double>(re - rb + 1));
+      progress("distributing", static_cast<double>(done) / static_cast<double>(my_records));
     });
     for (std::size_t k = 0; k < T; ++k) flush(k);
     for (auto& f : files)

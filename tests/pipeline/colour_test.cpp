@@ -13,32 +13,17 @@
 #include "scanclean/pipeline/clean_window.h"
 #include "scanclean/pipeline/frame_to_points.h"
 
+#include "support/synthetic.h"
+
 namespace scanclean {
 namespace {
-
-RangeFrame flat_frame(std::uint16_t depth_mm, std::uint8_t red) {
-  RangeFrame f;
-  f.depth = Image<std::uint16_t>(8, 6, depth_mm);
-  f.depth_unit_m = 0.001;
-  f.K.fx = f.K.fy = 10;
-  f.K.cx = 3.5;
-  f.K.cy = 2.5;
-  f.K.width = 8;
-  f.K.height = 6;
-  Image<std::array<std::uint8_t, 3>> rgb(8, 6);
-  for (int v = 0; v < 6; ++v)
-    for (int u = 0; u < 8; ++u)
-      rgb(u, v) = {red, static_cast<std::uint8_t>(10 * u), static_cast<std::uint8_t>(10 * v)};
-  f.color = std::move(rgb);
-  return f;
-}
 
 TEST(PipelineColourTest, PointsTakeTheirPixelsColourAndFusionAveragesIt) {
   SourceInfo info;
   FrameToPointsOptions o;
   o.edge_margin_px = 0;
   o.weights = false;
-  const PointCloud a = frame_to_points(flat_frame(1000, 100), info, o);
+  const PointCloud a = frame_to_points(test::coloured_wall_frame(1000, 100), info, o);
   ASSERT_TRUE(a.has_colors());
   ASSERT_EQ(a.colors.size(), a.size());
   for (int v = 0; v < 6; ++v)
@@ -52,8 +37,8 @@ TEST(PipelineColourTest, PointsTakeTheirPixelsColourAndFusionAveragesIt) {
       EXPECT_EQ(c[3], 255);
     }
   // Three frames: two at 1 m (red 100 and 200), one at 3 m (red 0), rejected by the median test.
-  const PointCloud b = frame_to_points(flat_frame(1000, 200), info, o);
-  const PointCloud far = frame_to_points(flat_frame(3000, 0), info, o);
+  const PointCloud b = frame_to_points(test::coloured_wall_frame(1000, 200), info, o);
+  const PointCloud far = frame_to_points(test::coloured_wall_frame(3000, 0), info, o);
   std::size_t rejected = 0;
   const std::optional<PointCloud> f = fuse_static_clouds({a, b, far}, {}, &rejected);
   ASSERT_TRUE(f.has_value());
@@ -68,8 +53,9 @@ TEST(PipelineColourTest, DepthFusionOfTheWindowAveragesTheKeptSamplesColours) {
   WindowOptions o;
   o.points.edge_margin_px = 0;
   o.points.weights = false;
-  const std::vector<RangeFrame> frames = {flat_frame(1000, 101), flat_frame(1000, 200),
-                                          flat_frame(3000, 0)};
+  const std::vector<RangeFrame> frames = {test::coloured_wall_frame(1000, 101),
+                                          test::coloured_wall_frame(1000, 200),
+                                          test::coloured_wall_frame(3000, 0)};
   const WindowInput in = window_input(frames, SourceInfo{}, o);
   EXPECT_EQ(in.fusion_rejected, 48u);
   ASSERT_EQ(in.points_fused, 48u);
@@ -92,7 +78,7 @@ TEST(PipelineColourTest, DepthFusionOfTheWindowAveragesTheKeptSamplesColours) {
 }
 
 TEST(PipelineColourTest, ColourImageOfAnotherSizeIsAnInputError) {
-  RangeFrame f = flat_frame(1000, 1);
+  RangeFrame f = test::coloured_wall_frame(1000, 1);
   f.color = Image<std::array<std::uint8_t, 3>>(4, 3);
   EXPECT_THROW(frame_to_points(f, SourceInfo{}, FrameToPointsOptions{}), InputError);
 }

@@ -10,26 +10,15 @@
 
 #include "scanclean/replay/recording_reader.h"
 #include "support/data_paths.h"
+#include "support/synthetic.h"
 
 namespace scanclean {
 namespace {
 
 RangeFrame coloured_frame(std::uint64_t index, std::uint8_t red) {
-  RangeFrame f;
+  RangeFrame f = test::coloured_wall_frame(1000, red);
   f.index = index;
   f.device_ts_us = static_cast<std::int64_t>(index) * 33333;
-  f.depth = Image<std::uint16_t>(8, 6, 1000);
-  f.depth_unit_m = 0.001;
-  f.K.fx = f.K.fy = 10;
-  f.K.cx = 3.5;
-  f.K.cy = 2.5;
-  f.K.width = 8;
-  f.K.height = 6;
-  Image<std::array<std::uint8_t, 3>> rgb(8, 6);
-  for (int v = 0; v < 6; ++v)
-    for (int u = 0; u < 8; ++u)
-      rgb(u, v) = {red, static_cast<std::uint8_t>(10 * u), static_cast<std::uint8_t>(10 * v)};
-  f.color = std::move(rgb);
   return f;
 }
 

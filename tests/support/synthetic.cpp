@@ -1,5 +1,6 @@
 #include "support/synthetic.h"
 
+#include <array>
 #include <cmath>
 #include <random>
 
@@ -67,6 +68,23 @@ std::vector<std::size_t> add_shell_outliers(PointCloud& cloud, std::size_t count
     cloud.positions.push_back(d * (radius + (k % 2 ? 1 : -1) * gap(rng)));
   }
   return added;
+}
+
+RangeFrame coloured_wall_frame(std::uint16_t depth_mm, std::uint8_t red) {
+  RangeFrame f;
+  f.depth = Image<std::uint16_t>(8, 6, depth_mm);
+  f.depth_unit_m = 0.001;
+  f.K.fx = f.K.fy = 10;
+  f.K.cx = 3.5;
+  f.K.cy = 2.5;
+  f.K.width = 8;
+  f.K.height = 6;
+  Image<std::array<std::uint8_t, 3>> rgb(8, 6);
+  for (int v = 0; v < 6; ++v)
+    for (int u = 0; u < 8; ++u)
+      rgb(u, v) = {red, static_cast<std::uint8_t>(10 * u), static_cast<std::uint8_t>(10 * v)};
+  f.color = std::move(rgb);
+  return f;
 }
 
 }  // namespace scanclean::test

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "scanclean/core/point_cloud.h"
+#include "scanclean/core/range_frame.h"
 
 namespace scanclean::test {
 
@@ -27,5 +28,9 @@ std::vector<std::size_t> add_uniform_outliers(PointCloud& cloud, std::size_t cou
 //! or confidences: outliers close to the surface. Returns the indices of the added points.
 std::vector<std::size_t> add_shell_outliers(PointCloud& cloud, std::size_t count, double radius,
                                             double near, double far, std::uint32_t seed);
+
+//! An 8x6 depth frame of a wall at depth_mm (millimetre units, fx = fy = 10 px, centred) with a
+//! colour image whose pixel (u, v) is (red, 10 u, 10 v).
+RangeFrame coloured_wall_frame(std::uint16_t depth_mm, std::uint8_t red);
 
 }  // namespace scanclean::test
