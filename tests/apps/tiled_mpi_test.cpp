@@ -19,18 +19,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The PLY bytes without the provenance comment line ("comment h=... command: ..."), which names
-// each run's own command line; fails the test when that line is missing.
-std::string without_provenance(const std::string& ply) {
-  const std::size_t at = ply.find("\ncomment h=");
-  EXPECT_NE(at, std::string::npos) << "no provenance comment with h";
-  if (at == std::string::npos) return ply;
-  const std::size_t end = ply.find('\n', at + 1);
-  EXPECT_NE(ply.find("command: ", at), std::string::npos);
-  EXPECT_LT(ply.find("command: ", at), end);
-  return ply.substr(0, at) + ply.substr(end);
-}
-
 class TiledProgram : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -86,6 +74,18 @@ TEST_F(TiledProgram, FilterTiledWritesEveryPointOnceAcrossTiles) {
 }
 
 #if defined(SCANCLEAN_MPI_PROGRAM) && defined(SCANCLEAN_MPIRUN)
+// The PLY bytes without the provenance comment line ("comment h=... command: ..."), which names
+// each run's own command line; fails the test when that line is missing.
+std::string without_provenance(const std::string& ply) {
+  const std::size_t at = ply.find("\ncomment h=");
+  EXPECT_NE(at, std::string::npos) << "no provenance comment with h";
+  if (at == std::string::npos) return ply;
+  const std::size_t end = ply.find('\n', at + 1);
+  EXPECT_NE(ply.find("command: ", at), std::string::npos);
+  EXPECT_LT(ply.find("command: ", at), end);
+  return ply.substr(0, at) + ply.substr(end);
+}
+
 TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
   if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
   // CI runs as root, which OpenMPI refuses unless told.
