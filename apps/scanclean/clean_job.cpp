@@ -83,14 +83,14 @@ std::function<void(PipelineOptions&)> add_clean_options(CLI::App& cmd) {
   return [v, filter](PipelineOptions& o) {
     o.memory_budget_bytes = static_cast<std::size_t>(v->memory_budget_mib * 1048576.0);
     o.accumulate = static_cast<std::size_t>(v->accumulate);
-    o.raw = v->raw;
-    o.fuse = !v->no_fuse;
-    o.filter = to_filter_options(*filter);
-    o.points.normal_stencil = v->stencil;
-    o.points.edge_margin_px = v->edge_margin;
-    o.points.min_depth_m = v->min_depth;
-    o.points.max_depth_m = v->max_depth;
-    o.points.weights = !v->no_weights;
+    o.window.raw = v->raw;
+    o.window.fuse = !v->no_fuse;
+    o.window.filter = to_filter_options(*filter);
+    o.window.points.normal_stencil = v->stencil;
+    o.window.points.edge_margin_px = v->edge_margin;
+    o.window.points.min_depth_m = v->min_depth;
+    o.window.points.max_depth_m = v->max_depth;
+    o.window.points.weights = !v->no_weights;
   };
 }
 
@@ -155,18 +155,19 @@ void parse_frame_range(const std::string& text, PipelineOptions& o) {
   };
   if (colon == std::string::npos) {
     o.first_frame = 0;
-    o.last_frame = number(text);
-    if (o.last_frame == 0) throw OptionError("--frames \"" + text + "\": expected A:B or N > 0");
+    o.acquisition.max_frames = number(text);
+    if (o.acquisition.max_frames == 0)
+      throw OptionError("--frames \"" + text + "\": expected A:B or N > 0");
     return;
   }
   o.first_frame = number(text.substr(0, colon));
-  o.last_frame = number(text.substr(colon + 1));
+  o.acquisition.max_frames = number(text.substr(colon + 1));
 }
 
 void check_clean_outputs(const std::string& command, const PipelineOptions& options,
                          const std::filesystem::path& input, const std::filesystem::path& output,
                          const std::filesystem::path& outliers) {
-  if (!outliers.empty() && options.raw)
+  if (!outliers.empty() && options.window.raw)
     throw OptionError(command + ": --outliers needs the filter (it is off with --raw)");
   std::vector<PathArg> inputs;
   std::error_code ec;
@@ -201,14 +202,14 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   if (!live.latest.empty())
     check_output_files(command, {},
                        {{"-o", output}, {"--outliers", outliers}, {"--latest", live.latest}});
-  if (!preview.empty() && options.raw)
+  if (!preview.empty() && options.window.raw)
     throw OptionError(command + ": --preview needs the filter (it is off with --raw)");
   check_preview_path(command, preview);
-  options.keep_input = !preview.empty();
+  options.window.keep_input = !preview.empty();
   std::string preview_text;  // the summary line, once the first window's preview is written
   validate(options);
   install_sigint_handler();
-  options.keep_going = [] { return !interrupted(); };
+  options.acquisition.keep_going = [] { return !interrupted(); };
 #ifdef __GLIBC__
   // Frames and clouds are large, short-lived blocks freed by other threads than the ones that
   // made them: with glibc's sliding mmap threshold they end up in per-thread heaps that keep
@@ -224,8 +225,9 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     std::fprintf(stderr, "scanclean %s: warning: %s\n", command.c_str(), w.c_str());
   std::uint64_t expected = 0;
   if (info.frame_count) expected = *info.frame_count;
-  if (options.last_frame > 0 && (expected == 0 || options.last_frame < expected))
-    expected = options.last_frame;
+  if (options.acquisition.max_frames > 0 &&
+      (expected == 0 || options.acquisition.max_frames < expected))
+    expected = options.acquisition.max_frames;
   if (expected > options.first_frame) expected -= options.first_frame;
   // One bar over reading and cleaning: a frame counts once when read and once when its window
   // is cleaned (or skipped), so the bar moves while the filter runs.
@@ -245,8 +247,8 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
   std::vector<WindowOutput> pending;  // to know whether there is more than one window
   auto write_window = [&](const WindowOutput& w, bool numbered) {
     const std::filesystem::path p = numbered ? window_path(output, w.window) : output;
-    const std::size_t in = options.raw ? w.cloud.size() : w.filter.points_in;
-    if (!options.raw && ((in >= 1 && w.cloud.empty()) || (in >= 2 && w.cloud.size() == 1))) {
+    const std::size_t in = options.window.raw ? w.cloud.size() : w.filter.points_in;
+    if (!options.window.raw && ((in >= 1 && w.cloud.empty()) || (in >= 2 && w.cloud.size() == 1))) {
       collapsed.push_back(p.string() + ": " + std::to_string(w.cloud.size()) + " point(s) from " +
                           with_thousands(in) + " (h " + std::to_string(w.filter.h * 1e3) +
                           " mm, merge eps " + std::to_string(w.filter.merge_eps * 1e3) + " mm)");
@@ -255,13 +257,13 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     AtomicCommitGroup both;  // the cloud and its outliers, or neither
     WriteOptions wo;         // provenance: command line, h, noise sigma
     wo.provenance =
-        options.raw ? provenance_text() : provenance_text(w.filter.h, w.filter.noise_sigma);
+        options.window.raw ? provenance_text() : provenance_text(w.filter.h, w.filter.noise_sigma);
     write_point_cloud(p, w.cloud, wo);
     if (!outliers.empty())
       write_point_cloud(numbered ? window_path(outliers, w.window) : outliers, w.outliers, wo);
     both.commit();
     note_report_output({"-o", p});
-    if (!options.raw) note_report_filter(p.string(), w.filter);
+    if (!options.window.raw) note_report_filter(p.string(), w.filter);
     if (!preview.empty() && preview_text.empty()) {
       PreviewOptions po;
       po.view = PreviewView::kCamera;
@@ -319,7 +321,7 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
     sum.add("frames recorded",
             with_thousands(st.frames_recorded) + " (in " + live.record.string() + ")");
   sum.add_count("frames used", st.frames_used);
-  if (!options.raw) sum.add_count("frames cleaned", st.frames_cleaned);
+  if (!options.window.raw) sum.add_count("frames cleaned", st.frames_cleaned);
   {
     // Every skipped window, as runs of consecutive windows: "5-9 (frames 150..299), 11 (...)".
     std::string names;
@@ -358,13 +360,13 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
                                    with_thousands(st.fusion_rejected) +
                                    " samples off their pixel's median depth dropped)");
   sum.add_count("points out", st.points_out);
-  if (!options.raw) sum.add_count("outliers removed", st.outliers);
-  sum.add("filter", options.raw ? std::string("off (--raw)") : std::string("robust filter"));
+  if (!options.window.raw) sum.add_count("outliers removed", st.outliers);
+  sum.add("filter", options.window.raw ? std::string("off (--raw)") : std::string("robust filter"));
   sum.add_count("windows", st.windows);
   sum.add("time", "read " + seconds_text(st.seconds_read) + ", points " +
                       seconds_text(st.seconds_points) + ", filter " +
                       seconds_text(st.seconds_filter));
-  if (!options.raw && st.windows > 0)
+  if (!options.window.raw && st.windows > 0)
     sum.add("filter phases", "scale " + seconds_text(phase_sum.seconds_scale) + ", kernels " +
                                  seconds_text(phase_sum.seconds_kernels) + ", projection " +
                                  seconds_text(phase_sum.seconds_projection) + ", clustering " +

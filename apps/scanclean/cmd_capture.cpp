@@ -41,9 +41,9 @@ int run_capture(const CaptureCommandOptions& c, const std::function<void(Pipelin
                 const std::function<void(const std::string&, SourceOptions&)>& intrinsics) {
   PipelineOptions o;
   apply(o);
-  o.last_frame = c.frames;
-  o.max_seconds = c.seconds;
-  o.reconnect_attempts = c.reconnect;
+  o.acquisition.max_frames = c.frames;
+  o.acquisition.max_seconds = c.seconds;
+  o.acquisition.reconnect_attempts = c.reconnect;
   SourceOptions so;
   so.depth_100um = c.depth_100um;
   intrinsics(c.source, so);

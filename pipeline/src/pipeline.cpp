@@ -55,37 +55,15 @@ double percentile(std::vector<double>& v, double q) {
 
 }  // namespace
 
-WindowOptions window_options(const PipelineOptions& o) {
-  WindowOptions w;
-  w.points = o.points;
-  w.fuse = o.fuse;
-  w.raw = o.raw;
-  w.filter = o.filter;
-  w.keep_input = o.keep_input;
-  return w;
-}
-
-AcquisitionOptions acquisition_options(const PipelineOptions& o) {
-  AcquisitionOptions a;
-  a.max_frames = o.last_frame;
-  a.max_seconds = o.max_seconds;
-  a.timeout = o.timeout;
-  a.max_consecutive_timeouts = o.max_consecutive_timeouts;
-  a.reconnect_attempts = o.reconnect_attempts;
-  a.reconnect_delay = o.reconnect_delay;
-  a.keep_going = o.keep_going;
-  return a;
-}
-
 void validate(const PipelineOptions& o) {
-  if (o.last_frame != 0 && o.last_frame <= o.first_frame)
+  if (o.acquisition.max_frames != 0 && o.acquisition.max_frames <= o.first_frame)
     throw OptionError("pipeline: frame range " + std::to_string(o.first_frame) + ":" +
-                      std::to_string(o.last_frame) +
+                      std::to_string(o.acquisition.max_frames) +
                       " is empty; give A:B with B > A (or B empty for 'to the end')");
   if (o.memory_budget_bytes == 0)
     throw OptionError("pipeline: option memory_budget_bytes = 0 is out of range; valid: > 0");
-  validate(acquisition_options(o));
-  validate(window_options(o));
+  validate(o.acquisition);
+  validate(o.window);
 }
 
 PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
@@ -97,7 +75,7 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
   if (!already_open) source.open();
   st.info = source.info();
   const SourceInfo info = st.info;
-  const WindowOptions wopts = window_options(options);
+  const WindowOptions& wopts = options.window;
   const bool may_skip = options.backlog == PipelineOptions::Backlog::kSkip ||
                         (options.backlog == PipelineOptions::Backlog::kAuto &&
                          (info.kind == "openni2" || info.kind == "vsensor"));
@@ -222,11 +200,11 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     submit(std::move(j), last);
   };
 
-  AcquisitionOptions ao = acquisition_options(options);
+  AcquisitionOptions ao = options.acquisition;
   ao.keep_going = [&] {
     // A stage failed: stop, the error is rethrown below.
     if (g->is_cancelled()) return false;
-    return !options.keep_going || options.keep_going();
+    return !options.acquisition.keep_going || options.acquisition.keep_going();
   };
   try {
     static_cast<AcquisitionStats&>(st) =

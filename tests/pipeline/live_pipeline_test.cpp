@@ -47,7 +47,7 @@ LiveRun run_recorded(const std::string& uri, PipelineOptions o,
 PipelineOptions small_windows(std::size_t frames) {
   PipelineOptions o;
   o.accumulate = frames;
-  o.filter.threads = 2;
+  o.window.filter.threads = 2;
   return o;
 }
 
@@ -107,7 +107,7 @@ TEST(LivePipelineTest, FileSourcesWaitInsteadOfSkipping) {
   // The same slow cleaning on the recording of a live run: nothing is skipped.
   const auto dir = test::make_temp_dir("live_file");
   PipelineOptions o = small_windows(10);
-  o.raw = true;
+  o.window.raw = true;
   const LiveRun live =
       run_recorded("vsensor://pattern?w=160&h=120&n=40&fps=60&pace=realtime", o, dir / "rec");
   const std::uint64_t n = live.stats.frames_read;
@@ -128,9 +128,9 @@ TEST(LivePipelineTest, FileSourcesWaitInsteadOfSkipping) {
 TEST(LivePipelineTest, DisconnectWithReconnectLosesNoRecordedFrame) {
   const auto dir = test::make_temp_dir("live_reconnect");
   PipelineOptions o = small_windows(10);
-  o.raw = true;  // the frames are the point here
-  o.reconnect_attempts = 3;
-  o.reconnect_delay = 50ms;
+  o.window.raw = true;  // the frames are the point here
+  o.acquisition.reconnect_attempts = 3;
+  o.acquisition.reconnect_delay = 50ms;
   // The device goes away after 25 frames; every reopened device does the same.
   const LiveRun run =
       run_recorded("vsensor://pattern?w=160&h=120&n=60&fps=60&pace=realtime&disconnect_after=25", o,
@@ -151,7 +151,7 @@ TEST(LivePipelineTest, InterruptMidWindowCleansWhatWasCaptured) {
   PipelineOptions o = small_windows(10);
   std::atomic<std::uint64_t> used{0};
   o.on_frame = [&](std::uint64_t n) { used = n; };
-  o.keep_going = [&] { return used.load() < 15; };  // Ctrl-C in the middle of window 1
+  o.acquisition.keep_going = [&] { return used.load() < 15; };  // Ctrl-C in the middle of window 1
   const LiveRun run =
       run_recorded("vsensor://pattern?w=160&h=120&n=300&fps=60&pace=realtime", o, dir / "rec");
   EXPECT_EQ(run.stats.stop, StopReason::kInterrupted);
@@ -172,7 +172,7 @@ TEST(LivePipelineTest, ReplayOfTheRecordingCleansTheSameWindows) {
   ASSERT_TRUE(live.stats.skipped.empty());
   ASSERT_EQ(live.windows.size(), 3u);
   PipelineOptions replay = small_windows(10);
-  replay.filter.threads = 1;  // and the thread count does not matter
+  replay.window.filter.threads = 1;  // and the thread count does not matter
   auto source = make_range_source((dir / "rec").string());
   std::vector<WindowOutput> again;
   run_pipeline(*source, replay, [&](WindowOutput&& w) { again.push_back(std::move(w)); });

@@ -69,8 +69,8 @@ std::vector<ScriptedSource::Step> ok_frames(std::uint64_t first, std::uint64_t n
 
 PipelineOptions raw_options() {
   PipelineOptions o;
-  o.raw = true;
-  o.points.edge_margin_px = 0;
+  o.window.raw = true;
+  o.window.points.edge_margin_px = 0;
   return o;
 }
 
@@ -97,7 +97,7 @@ TEST(PipelineTest, FrameRangeAndAllInOne) {
   ScriptedSource src(ok_frames(10, 8));
   PipelineOptions o = raw_options();
   o.first_frame = 2;
-  o.last_frame = 6;
+  o.acquisition.max_frames = 6;
   std::vector<WindowOutput> out;
   const PipelineStats st =
       run_pipeline(src, o, [&](WindowOutput&& w) { out.push_back(std::move(w)); });
@@ -122,7 +122,7 @@ TEST(PipelineTest, GapsAndTimeoutsAreCounted) {
   // Consecutive-timeout limit.
   ScriptedSource src2(steps);
   PipelineOptions o = raw_options();
-  o.max_consecutive_timeouts = 2;
+  o.acquisition.max_consecutive_timeouts = 2;
   const PipelineStats st2 = run_pipeline(src2, o, {});
   EXPECT_EQ(st2.stop, StopReason::kTimeouts);
   EXPECT_EQ(st2.frames_used, 3u);
@@ -144,8 +144,8 @@ TEST(PipelineTest, DisconnectStopsCleanlyKeepingFramesOrReconnects) {
   {
     ScriptedSource src(steps);
     PipelineOptions o = raw_options();
-    o.reconnect_attempts = 2;
-    o.reconnect_delay = 1ms;
+    o.acquisition.reconnect_attempts = 2;
+    o.acquisition.reconnect_delay = 1ms;
     std::size_t frames = 0;
     const PipelineStats st = run_pipeline(src, o, [&](WindowOutput&& w) { frames += w.frames; });
     EXPECT_EQ(st.stop, StopReason::kEndOfStream);
@@ -158,8 +158,8 @@ TEST(PipelineTest, DisconnectStopsCleanlyKeepingFramesOrReconnects) {
     ScriptedSource src(steps);
     src.fail_reopen = true;
     PipelineOptions o = raw_options();
-    o.reconnect_attempts = 2;
-    o.reconnect_delay = 1ms;
+    o.acquisition.reconnect_attempts = 2;
+    o.acquisition.reconnect_delay = 1ms;
     const PipelineStats st = run_pipeline(src, o, {});
     EXPECT_EQ(st.stop, StopReason::kDisconnected);
     EXPECT_EQ(src.opens, 3);
@@ -191,8 +191,8 @@ TEST(PipelineTest, ReconnectAttemptsAreABudgetForTheWholeRun) {
   }
   ScriptedSource src(steps);
   PipelineOptions o = raw_options();
-  o.reconnect_attempts = 3;
-  o.reconnect_delay = 1ms;
+  o.acquisition.reconnect_attempts = 3;
+  o.acquisition.reconnect_delay = 1ms;
   const PipelineStats st = run_pipeline(src, o, {});
   EXPECT_EQ(st.stop, StopReason::kDisconnected);
   EXPECT_TRUE(st.reconnect_budget_exhausted);
@@ -208,7 +208,7 @@ TEST(PipelineTest, InterruptWritesWhatWasCaptured) {
   PipelineOptions o = raw_options();
   std::uint64_t used = 0;
   o.on_frame = [&](std::uint64_t n) { used = n; };
-  o.keep_going = [&] { return used < 4; };
+  o.acquisition.keep_going = [&] { return used < 4; };
   std::size_t frames = 0;
   const PipelineStats st = run_pipeline(src, o, [&](WindowOutput&& w) { frames += w.frames; });
   EXPECT_EQ(st.stop, StopReason::kInterrupted);
@@ -219,10 +219,10 @@ TEST(PipelineTest, BadOptionsAreRejected) {
   ScriptedSource src(ok_frames(0, 2));
   PipelineOptions o;
   o.first_frame = 5;
-  o.last_frame = 3;
+  o.acquisition.max_frames = 3;
   EXPECT_THROW(run_pipeline(src, o, {}), OptionError);
   PipelineOptions bad_filter;
-  bad_filter.filter.tau = 7;
+  bad_filter.window.filter.tau = 7;
   EXPECT_THROW(run_pipeline(src, bad_filter, {}), OptionError);
 }
 

@@ -30,29 +30,18 @@
 namespace scanclean {
 
 struct PipelineOptions {
-  //! Delivered frames [first_frame, last_frame) are used, counted from 0 in delivery order
-  //! (not by source index); frames before first_frame are read and skipped. last_frame 0 = to
-  //! the end.
+  //! Delivered frames [first_frame, acquisition.max_frames) are used, counted from 0 in
+  //! delivery order (not by source index); frames before first_frame are read and skipped.
+  //! acquisition.max_frames 0 = to the end.
   std::uint64_t first_frame = 0;
-  std::uint64_t last_frame = 0;
   //! Frames per output window (each window filtered into one cloud); 0 = all frames in one.
   std::size_t accumulate = 0;
-  double max_seconds = 0;                   //!< stop after this much wall time (0 = no limit)
-  std::chrono::milliseconds timeout{2000};  //!< per next() call
-  //! Stop after this many consecutive timeouts (0 = never; live sources report kDisconnected).
-  int max_consecutive_timeouts = 0;
-  //! On kDisconnected: close(), then open() again. This is the budget of open() attempts over
-  //! the whole run, not per disconnect, so a source that keeps disconnecting ends (0 = stop
-  //! cleanly at the first disconnect).
-  int reconnect_attempts = 0;
-  std::chrono::milliseconds reconnect_delay{500};
-  bool raw = false;  //!< no filter: each window's points are the output (normals, confidences)
-  //! Before filtering, fuse each window's frames per pixel (fuse_static_clouds: one static
-  //! view, as accumulation assumes): one point per pixel with the temporal mean of its
-  //! consistent samples, weighted by how many there are. false: every sample is a point.
-  bool fuse = true;
-  FrameToPointsOptions points;
-  FilterOptions filter = depth_frame_options();  //!< the depth-frame preset
+  //! How frames are read: the frame limit, seconds, timeouts, reconnects, keep_going (Ctrl-C).
+  AcquisitionOptions acquisition;
+  //! How each window is cleaned: conversion, per-pixel fusion, raw, the filter (the depth-frame
+  //! preset) and keep_input (each window's filter input kept in WindowOutput::input, e.g. for a
+  //! before/after preview).
+  WindowOptions window;
   //! Complete windows waiting to be cleaned (their raw frames, from the moment the window is
   //! complete until its output is delivered) may hold at most this many bytes; a window that
   //! would exceed it while others wait is skipped (device sources) or waited for (files). A
@@ -62,11 +51,6 @@ struct PipelineOptions {
   //! Whether a window beyond the budget is skipped. kAuto: skip for device sources (SourceInfo
   //! kind "openni2" or "vsensor", which pace themselves), wait for every other (file) source.
   enum class Backlog { kAuto, kSkip, kWait } backlog = Backlog::kAuto;
-  //! Keep each window's points as they went into the filter in WindowOutput::input (e.g. for a
-  //! before/after preview).
-  bool keep_input = false;
-  //! Polled before every read; returning false stops cleanly (SIGINT). Optional.
-  std::function<bool()> keep_going;
   //! Records every delivered frame (frames before first_frame too), in delivery order, in the
   //! acquisition stage itself (this thread, never behind a cleaning task: TBB workers run those).
   //! A source that emits frames on its own clock must keep them while this runs (OpenNI2
@@ -82,13 +66,7 @@ struct PipelineOptions {
   std::function<void(std::size_t window)> before_cleaning;
 };
 
-//! The window options (points, fusion, raw, filter) of the pipeline options.
-WindowOptions window_options(const PipelineOptions& options);
-//! The acquisition options (frame limit = last_frame, seconds, timeouts, reconnects,
-//! keep_going) of the pipeline options.
-AcquisitionOptions acquisition_options(const PipelineOptions& options);
-
-//! \throw OptionError naming the option (also validates points and, unless raw, filter).
+//! \throw OptionError naming the option (also validates the acquisition and window options).
 void validate(const PipelineOptions& options);
 
 //! One output cloud: the frames [first, last] of the window (delivery positions).
@@ -99,7 +77,7 @@ struct WindowOutput {
   PointCloud cloud;     //!< cleaned (or raw) points
   PointCloud outliers;  //!< points the filter removed (empty when raw)
   FilterStats filter;   //!< zero when raw
-  PointCloud input;     //!< the filter's input, only with PipelineOptions::keep_input
+  PointCloud input;     //!< the filter's input, only with PipelineOptions::window.keep_input
 };
 
 //! A window that was not cleaned because cleaning fell behind (memory budget).
@@ -112,7 +90,8 @@ struct SkippedWindow {
 //! The acquisition's counts (frames_read, gaps, timeouts, reconnects, stop, ...) plus the
 //! windows'.
 struct PipelineStats : AcquisitionStats {
-  std::uint64_t frames_used = 0;     //!< frames in [first_frame, last_frame) put in windows
+  std::uint64_t frames_used =
+      0;  //!< frames in [first_frame, acquisition.max_frames) put in windows
   std::uint64_t frames_cleaned = 0;  //!< frames of the windows that were output
   std::size_t windows = 0;
   std::size_t points_in = 0;   //!< valid samples (fused windows) or points (others) of used frames
