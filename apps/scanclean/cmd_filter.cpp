@@ -70,8 +70,10 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
           "byte ranges); convert it with scanclean convert");
     return -1;
   }
-  const auto records = PointStream::open(in)->size();
-  if (!c.tiled && in_memory_bytes(records) <= t.memory_budget) return -1;
+  const auto stream = PointStream::open(in);
+  const auto records = stream->size();
+  if (!c.tiled && in_memory_bytes(records, stream->attributes().size()) <= t.memory_budget)
+    return -1;
   if (point_cloud_format(c.output) != "ply" ||
       (!c.outliers.empty() && point_cloud_format(c.outliers) != "ply") || c.ascii)
     throw OptionError("filter: the tiled (out-of-core) run of " + with_thousands(records) +

@@ -5,6 +5,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -81,6 +82,23 @@ std::pair<std::uint64_t, std::string> get_block(std::istream& is, const std::fil
   return {points, std::move(bytes)};
 }
 
+// The attributes of an output as the in-memory filter makes them: the input's (select()), then
+// the filter's own (set_attribute()), each taking the place and type of an input attribute of
+// its name, else appended.
+std::vector<std::pair<std::string, AttributeType>> with_outputs(
+    std::vector<std::pair<std::string, AttributeType>> attributes,
+    const std::vector<std::pair<std::string, AttributeType>>& outputs) {
+  for (const auto& o : outputs) {
+    const auto it = std::find_if(attributes.begin(), attributes.end(),
+                                 [&](const auto& a) { return a.first == o.first; });
+    if (it != attributes.end())
+      it->second = o.second;
+    else
+      attributes.push_back(o);
+  }
+  return attributes;
+}
+
 }  // namespace
 
 TiledRunResult run_tiled(const TiledRunRequest& req) {
@@ -89,6 +107,7 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
   result.records = stream->size();
   TiledSource src;
   src.records = stream->size();
+  src.attributes = stream->attributes();
   const PointStream* s = stream.get();
   src.read = [s](std::uint64_t first, std::uint64_t count, PointCloud& out,
                  std::vector<std::uint64_t>& rec) { s->read(first, count, out, &rec); };
@@ -140,13 +159,15 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
     // double (exact up to 2^53 records; PLY has no 64-bit integer type).
     const AttributeType index_type =
         s->size() > 0xffffffffULL ? AttributeType::kFloat64 : AttributeType::kUInt32;
-    cloud_layout.attributes = {{"likelihood", AttributeType::kFloat32},
-                               {"iterations", AttributeType::kUInt8},
-                               {"flags", AttributeType::kUInt8},
-                               {"merge_count", AttributeType::kUInt32},
-                               {"source_index", index_type},
-                               {"displacement", AttributeType::kFloat32}};
-    outlier_layout.attributes = {{"flags", AttributeType::kUInt8}, {"source_index", index_type}};
+    cloud_layout.attributes =
+        with_outputs(s->attributes(), {{"likelihood", AttributeType::kFloat32},
+                                       {"iterations", AttributeType::kUInt8},
+                                       {"flags", AttributeType::kUInt8},
+                                       {"merge_count", AttributeType::kUInt32},
+                                       {"source_index", index_type},
+                                       {"displacement", AttributeType::kFloat32}});
+    outlier_layout.attributes = with_outputs(
+        s->attributes(), {{"flags", AttributeType::kUInt8}, {"source_index", index_type}});
     if (rank0) {
       // The same provenance comment as the in-memory run's outputs (h, noise sigma, command).
       const std::string prov =

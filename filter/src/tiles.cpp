@@ -7,6 +7,7 @@
 #include <map>
 #include <numeric>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -311,9 +312,11 @@ Plan make_plan(const Grid& grid, const std::vector<std::uint64_t>& hist, double 
 
 struct Columns {
   bool normals = false, confidences = false, intensities = false, colors = false;
+  //! The input's attributes (TiledSource::attributes), each value a double in the record.
+  std::vector<std::pair<std::string, AttributeType>> attributes;
   std::size_t bytes() const {
     return 8 + 24 + (normals ? 12 : 0) + (confidences ? 4 : 0) + (intensities ? 4 : 0) +
-           (colors ? 4 : 0);
+           (colors ? 4 : 0) + 8 * attributes.size();
   }
 };
 
@@ -326,6 +329,7 @@ void put_point(std::string& buf, const PointCloud& c, std::size_t i, std::uint64
   if (cols.confidences) put(&c.confidences[i], 4);
   if (cols.intensities) put(&c.intensities[i], 4);
   if (cols.colors) put(c.colors[i].data(), 4);
+  for (const Attribute& a : c.attributes) put(&a.values[i], 8);
 }
 
 void read_points(const std::filesystem::path& file, const Columns& cols, PointCloud& c,
@@ -337,6 +341,8 @@ void read_points(const std::filesystem::path& file, const Columns& cols, PointCl
   if (n * cols.bytes() != bytes.size())
     throw IoError(file.string() + ": scratch file of a tile has a partial record");
   const char* p = bytes.data();
+  if (c.attributes.empty())
+    for (const auto& [name, type] : cols.attributes) c.attributes.push_back({name, type, {}});
   for (std::size_t i = 0; i < n; ++i) {
     std::uint64_t rec;
     std::memcpy(&rec, p, 8);
@@ -364,6 +370,12 @@ void read_points(const std::filesystem::path& file, const Columns& cols, PointCl
       std::memcpy(col.data(), p, 4);
       c.colors.push_back(col);
       p += 4;
+    }
+    for (Attribute& a : c.attributes) {
+      double v;
+      std::memcpy(&v, p, 8);
+      a.values.push_back(v);
+      p += 8;
     }
   }
 }
@@ -405,13 +417,14 @@ void validate(const TiledOptions& t) {
 // Measured on the scaling benchmark's scenes (docs/SCALING.md): the filter's own peak
 // plus the tile's input and result copies, about 330 bytes per point, and 192 MiB for the
 // histogram, the read buffers and the program.
-std::uint64_t tile_point_limit(std::size_t budget) {
+std::uint64_t tile_point_limit(std::size_t budget, std::size_t attributes) {
   const std::uint64_t fixed = std::uint64_t{192} << 20;
-  return budget > fixed + (std::uint64_t{16} << 20) ? (budget - fixed) / 330 : 50000;
+  const std::uint64_t per_point = 330 + 24 * std::uint64_t{attributes};
+  return budget > fixed + (std::uint64_t{16} << 20) ? (budget - fixed) / per_point : 50000;
 }
 
-std::uint64_t in_memory_bytes(std::uint64_t points) {
-  return points * 330 + (std::uint64_t{64} << 20);
+std::uint64_t in_memory_bytes(std::uint64_t points, std::size_t attributes) {
+  return points * (330 + 24 * std::uint64_t{attributes}) + (std::uint64_t{64} << 20);
 }
 
 TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const TiledOptions& t,
@@ -436,6 +449,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   std::vector<std::uint64_t> sample_rec(M);
   for (std::uint64_t k = 0; k < M; ++k) sample_rec[k] = k * src.records / M;
   Columns cols;
+  cols.attributes = src.attributes;
   std::vector<Eigen::Vector3d> sample_xyz;  // the samples' positions, in record order
   {
     Eigen::AlignedBox3d box;
@@ -445,6 +459,8 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     std::size_t next = static_cast<std::size_t>(
         std::lower_bound(sample_rec.begin(), sample_rec.end(), rb) - sample_rec.begin());
     stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
+      if (c.attributes.size() != cols.attributes.size())
+        throw std::logic_error("tiled filter: read() gave other attributes than announced");
       for (const auto& p : c.positions) box.extend(p);
       n += c.size();
       has[0] |= c.has_normals();
@@ -755,9 +771,11 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   // The tile plan; pass 4 (kernel stride > 1): the kernel sites; pass 5: every point into the
   // scratch files of its tiles.
   auto t_dist = Clock::now();
-  const Plan plan = make_plan(
-      grid, hist, gl.halo,
-      t.max_tile_points > 0 ? t.max_tile_points : tile_point_limit(t.memory_budget), comm.ranks);
+  const Plan plan =
+      make_plan(grid, hist, gl.halo,
+                t.max_tile_points > 0 ? t.max_tile_points
+                                      : tile_point_limit(t.memory_budget, cols.attributes.size()),
+                comm.ranks);
   std::vector<std::uint64_t>().swap(hist);
   st.tiles = plan.tiles.size();
   // Kernels at every stride-th point of the whole cloud's grid order (kernels.h), not of each

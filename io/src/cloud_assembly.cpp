@@ -16,13 +16,13 @@ int find_column(const std::vector<Column>& cols, std::initializer_list<const cha
   return -1;
 }
 
+}  // namespace
+
 std::uint8_t to_colour_byte(double v, bool floating) {
   if (std::isnan(v)) return 0;
   if (floating) v *= 255.0;
   return static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L));
 }
-
-}  // namespace
 
 PointCloud assemble_cloud(std::vector<Column>& columns, std::size_t n, OrganizedGrid grid,
                           const std::string& file, const std::string& element_word,

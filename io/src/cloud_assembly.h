@@ -3,6 +3,7 @@
 // conventional names to the PointCloud arrays and keeping the rest as attributes.
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -18,6 +19,10 @@ struct Column {
   bool floating = false;  //!< source values are floating point (colours in [0,1] then)
   std::vector<double> values;
 };
+
+//! A colour channel as a byte: integers as they are, floats (floating) in [0, 1] scaled by 255;
+//! rounded and clamped to [0, 255]; NaN is 0. Used by every reader.
+std::uint8_t to_colour_byte(double v, bool floating);
 
 enum class InvalidPolicy { kDrop, kReject };
 

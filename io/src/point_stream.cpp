@@ -11,6 +11,7 @@
 #include <cstring>
 #include <string_view>
 
+#include "cloud_assembly.h"
 #include "file_bytes.h"
 #include "scanclean/core/errors.h"
 
@@ -42,6 +43,29 @@ int pcd_type(char t, long size) {
   if (t == 'U')
     return size == 1 ? kU8 : size == 2 ? kU16 : size == 4 ? kU32 : size == 8 ? kU64 : -1;
   return -1;
+}
+
+// The attribute type the whole-file readers give a field of this type (ply_read, pcd_read).
+AttributeType attribute_type(int type) {
+  switch (type) {
+    case kU8:
+      return AttributeType::kUInt8;
+    case kU16:
+    case kU32:
+      return AttributeType::kUInt32;
+    case kI8:
+    case kI16:
+    case kI32:
+      return AttributeType::kInt32;
+    case kF32:
+      return AttributeType::kFloat32;
+    default:  // kF64, kI64, kU64
+      return AttributeType::kFloat64;
+  }
+}
+
+bool floating(int type) {
+  return type == kF32 || type == kF64;
 }
 
 template <class T>
@@ -103,6 +127,63 @@ struct PointStreamParser {
   PointStream& s;
   std::string file;
   std::string head;  // the header bytes read so far
+  struct Named {
+    std::string name;
+    PointStream::Field field;
+  };
+  std::vector<Named> fields;  // the record's scalar fields a cloud can take, in file order
+
+  // Maps the fields to the cloud as assemble_cloud (cloud_assembly.h) maps the whole-file
+  // readers' columns: the first field of a name; normals and colours only when complete; every
+  // field left over becomes an attribute unless one of its name exists already.
+  void assign(bool packed_colour) {
+    std::vector<bool> used(fields.size(), false);
+    auto find = [&](const char* name) {
+      for (std::size_t i = 0; i < fields.size(); ++i)
+        if (fields[i].name == name) return static_cast<int>(i);
+      return -1;
+    };
+    auto take = [&](int i, PointStream::Field& f) {
+      if (i < 0) return;
+      f = fields[static_cast<std::size_t>(i)].field;
+      used[static_cast<std::size_t>(i)] = true;
+    };
+    const int xyz[3] = {find("x"), find("y"), find("z")};
+    if (xyz[0] < 0 || xyz[1] < 0 || xyz[2] < 0) fail("header", "no x, y and z fields");
+    for (int a = 0; a < 3; ++a) take(xyz[a], s.xyz_[a]);
+    int n[3] = {find("nx"), find("ny"), find("nz")};
+    if (n[0] < 0 || n[1] < 0 || n[2] < 0) {
+      n[0] = find("normal_x");
+      n[1] = find("normal_y");
+      n[2] = find("normal_z");
+    }
+    if (n[0] >= 0 && n[1] >= 0 && n[2] >= 0)
+      for (int a = 0; a < 3; ++a) take(n[a], s.n_[a]);
+    take(find("confidence"), s.conf_);
+    take(find("intensity"), s.inten_);
+    int c[4] = {find("red"), find("green"), find("blue"), find("alpha")};
+    if (c[0] < 0 || c[1] < 0 || c[2] < 0) {
+      c[0] = find("diffuse_red");
+      c[1] = find("diffuse_green");
+      c[2] = find("diffuse_blue");
+      c[3] = find("diffuse_alpha");
+    }
+    if (c[0] >= 0 && c[1] >= 0 && c[2] >= 0) {
+      for (int a = 0; a < 4; ++a) take(c[a], s.rgba_[a]);
+      s.colors_ = true;
+    } else if (packed_colour) {
+      s.colors_ = s.packed_colour_ = true;  // rgba_[0] holds the packed field
+    }
+    for (std::size_t i = 0; i < fields.size(); ++i) {
+      if (used[i]) continue;
+      const std::string& name = fields[i].name;
+      if (std::any_of(s.attribute_types_.begin(), s.attribute_types_.end(),
+                      [&](const auto& a) { return a.first == name; }))
+        continue;
+      s.attribute_fields_.push_back(fields[i].field);
+      s.attribute_types_.emplace_back(name, attribute_type(fields[i].field.type));
+    }
+  }
 
   [[noreturn]] void fail(const std::string& place, const std::string& what) const {
     throw InputError(file, place, what);
@@ -193,20 +274,8 @@ struct PointStreamParser {
         const int type = ply_type(t);
         if (type < 0) fail(place, "unknown property type " + io_detail::quote(t));
         const std::string_view name = io_detail::next_token(rest);
-        if (in_vertex) {
-          PointStream::Field f{type, static_cast<std::uint32_t>(element_bytes)};
-          const char* xyz[] = {"x", "y", "z"};
-          const char* nn[] = {"nx", "ny", "nz"};
-          const char* rgba[] = {"red", "green", "blue", "alpha"};
-          for (int a = 0; a < 3; ++a) {
-            if (name == xyz[a]) s.xyz_[a] = f;
-            if (name == nn[a]) s.n_[a] = f;
-          }
-          for (int a = 0; a < 4; ++a)
-            if (name == rgba[a] || name == std::string("diffuse_") + rgba[a]) s.rgba_[a] = f;
-          if (name == "confidence") s.conf_ = f;
-          if (name == "intensity") s.inten_ = f;
-        }
+        if (in_vertex)
+          fields.push_back({std::string(name), {type, static_cast<std::uint32_t>(element_bytes)}});
         element_bytes += kTypeSize[type];
         if (in_vertex) s.stride_ = element_bytes;
       } else if (kw == "end_header") {
@@ -220,6 +289,7 @@ struct PointStreamParser {
     if (!format_seen) fail("header", "no format line");
     if (!vertex_seen) fail("header", "no vertex element");
     s.data_ += before_vertex;
+    assign(false);
   }
 
   void pcd() {
@@ -283,6 +353,7 @@ struct PointStreamParser {
     if (!points_seen) fail("header", "no POINTS line");
     s.records_ = points;
     std::uint64_t off = 0;
+    bool packed = false;
     for (std::size_t k = 0; k < names.size(); ++k) {
       const int type = pcd_type(types[k], sizes[k]);
       if (type < 0)
@@ -290,36 +361,27 @@ struct PointStreamParser {
                            std::to_string(sizes[k]));
       PointStream::Field f{type, static_cast<std::uint32_t>(off)};
       const std::string& n = names[k];
-      if (counts[k] == 1) {
-        const char* xyz[] = {"x", "y", "z"};
-        const char* nn[] = {"normal_x", "normal_y", "normal_z"};
-        for (int a = 0; a < 3; ++a) {
-          if (n == xyz[a]) s.xyz_[a] = f;
-          if (n == nn[a]) s.n_[a] = f;
-        }
-        if (n == "confidence") s.conf_ = f;
-        if (n == "intensity") s.inten_ = f;
-        if ((n == "rgb" || n == "rgba") && sizes[k] == 4) {
+      // As read_pcd: COUNT 1 fields only, "_" is padding, the first rgb / rgba of 4 bytes is
+      // the packed colour.
+      if (counts[k] == 1 && n != "_") {
+        if ((n == "rgb" || n == "rgba") && sizes[k] == 4 && !packed) {
           s.rgba_[0] = f;
-          s.colors_ = true;
           s.packed_alpha_ = n == "rgba";
+          packed = true;
+        } else {
+          fields.push_back({n, f});
         }
       }
       off += static_cast<std::uint64_t>(sizes[k]) * static_cast<std::uint64_t>(counts[k]);
     }
     s.stride_ = off;
+    assign(packed);
   }
 
   void finish() {
-    for (int a = 0; a < 3; ++a)
-      if (s.xyz_[a].type < 0) fail("header", "no x, y and z fields");
     s.normals_ = s.n_[0].type >= 0 && s.n_[1].type >= 0 && s.n_[2].type >= 0;
     s.confidence_ = s.conf_.type;
     s.intensity_ = s.inten_.type;
-    if (!s.pcd_) {
-      s.colors_ = s.rgba_[0].type == kU8 && s.rgba_[1].type == kU8 && s.rgba_[2].type == kU8;
-      if (s.rgba_[3].type != kU8) s.rgba_[3].type = -1;
-    }
     if (s.stride_ == 0) fail("header", "records of zero bytes");
     const std::uint64_t size = std::filesystem::file_size(s.path_);
     if (s.records_ > (size - std::min(size, s.data_)) / s.stride_)
@@ -344,7 +406,7 @@ std::unique_ptr<PointStream> PointStream::open(const std::filesystem::path& path
   s->pcd_ = ext == ".pcd";
   s->fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (s->fd_ < 0) throw IoError(path.string() + ": cannot open: " + std::strerror(errno));
-  PointStreamParser p{*s, path.string(), {}};
+  PointStreamParser p{*s, path.string(), {}, {}};
   if (s->pcd_)
     p.pcd();
   else
@@ -380,6 +442,10 @@ void PointStream::read(std::uint64_t first, std::uint64_t count, PointCloud& out
   if (confidence_ >= 0) out.confidences.reserve(count);
   if (intensity_ >= 0) out.intensities.reserve(count);
   if (colors_) out.colors.reserve(count);
+  for (const auto& [name, type] : attribute_types_) {
+    out.attributes.push_back(Attribute{name, type, {}});
+    out.attributes.back().values.reserve(count);
+  }
   if (records) records->reserve(count);
   for (std::uint64_t i = 0; i < count; ++i) {
     const auto* r = reinterpret_cast<const unsigned char*>(buf.data()) + i * stride_;
@@ -399,17 +465,25 @@ void PointStream::read(std::uint64_t first, std::uint64_t count, PointCloud& out
       out.intensities.push_back(static_cast<float>(value(r + inten_.offset, inten_.type, swap)));
     if (colors_) {
       std::array<std::uint8_t, 4> c{};
-      if (pcd_) {
+      if (packed_colour_) {
         const std::uint32_t v = load<std::uint32_t>(r + rgba_[0].offset, swap);
         c = {static_cast<std::uint8_t>(v >> 16), static_cast<std::uint8_t>(v >> 8),
              static_cast<std::uint8_t>(v),
              packed_alpha_ ? static_cast<std::uint8_t>(v >> 24) : std::uint8_t{255}};
       } else {
-        for (int a = 0; a < 3; ++a) c[a] = r[rgba_[a].offset];
-        c[3] = rgba_[3].type >= 0 ? r[rgba_[3].offset] : 255;
+        for (int a = 0; a < 4; ++a) {
+          const Field& f = rgba_[static_cast<std::size_t>(a)];
+          c[static_cast<std::size_t>(a)] =
+              f.type >= 0
+                  ? io_detail::to_colour_byte(value(r + f.offset, f.type, swap), floating(f.type))
+                  : std::uint8_t{255};
+        }
       }
       out.colors.push_back(c);
     }
+    for (std::size_t a = 0; a < attribute_fields_.size(); ++a)
+      out.attributes[a].values.push_back(
+          value(r + attribute_fields_[a].offset, attribute_fields_[a].type, swap));
   }
 }
 

@@ -35,6 +35,7 @@ PointCloud scene(std::uint32_t seed) {
 TiledSource source_of(const PointCloud& c) {
   TiledSource s;
   s.records = c.size();
+  for (const Attribute& a : c.attributes) s.attributes.emplace_back(a.name, a.type);
   s.read = [&c](std::uint64_t first, std::uint64_t count, PointCloud& out,
                 std::vector<std::uint64_t>& rec) {
     const std::uint64_t end = std::min<std::uint64_t>(c.size(), first + count);
@@ -200,6 +201,54 @@ TEST(TiledFilter, KernelStrideTakesTheWholeCloudsSubsampleInEveryTile) {
   EXPECT_LE(static_cast<double>(d.outlier_diff), 1.5e-3 * n);
   EXPECT_LE(static_cast<double>(d.flags_differ), 1e-3 * n);
   EXPECT_LT(d.largest, 1e-3 * h);
+}
+
+// The input's own attributes (a scanner's classification, GPS time, a label named like an
+// output) reach the tiled outputs as they reach the in-memory ones: same names, order and types,
+// and each output point and outlier holds its input point's values.
+TEST(TiledFilter, InputAttributesReachTheOutputsAsInMemory) {
+  PointCloud c = scene(7);
+  std::vector<double> cls(c.size()), time(c.size()), flags(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    cls[i] = static_cast<double>(i % 7);
+    time[i] = 1.0e9 + 0.001 * static_cast<double>(i);  // needs a double
+    flags[i] = 200;  // named like an output: the filter's flags take its place
+  }
+  c.set_attribute("classification", AttributeType::kUInt8, cls);
+  c.set_attribute("flags", AttributeType::kUInt8, flags);
+  c.set_attribute("gps_time", AttributeType::kFloat64, time);
+  FilterOptions o;
+  o.kernel_stride = 1;
+  const Tiled tiled = run_tiled(c, o, 14000);
+  ASSERT_GE(tiled.stats.tiles, 8u);
+  FilterOptions fixed = o;
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = tiled.stats.globals.h;
+  fixed.merge_eps = tiled.stats.globals.merge_eps;
+  const FilterResult mem = robust_filter(c, fixed);
+  auto names = [](const PointCloud& p) {
+    std::vector<std::pair<std::string, AttributeType>> v;
+    for (const Attribute& a : p.attributes) v.emplace_back(a.name, a.type);
+    return v;
+  };
+  ASSERT_FALSE(tiled.cloud.attributes.empty());
+  EXPECT_EQ(names(tiled.cloud), names(mem.cloud));
+  EXPECT_EQ(names(tiled.outliers), names(mem.outliers));
+  EXPECT_EQ(tiled.cloud.attributes.front().name, "classification");
+  for (const PointCloud* out : {&tiled.cloud, &tiled.outliers}) {
+    ASSERT_GT(out->size(), 0u);
+    const Attribute* si = out->find_attribute("source_index");
+    const Attribute* oc = out->find_attribute("classification");
+    const Attribute* ot = out->find_attribute("gps_time");
+    const Attribute* of = out->find_attribute("flags");
+    ASSERT_TRUE(si && oc && ot && of);
+    for (std::size_t k = 0; k < out->size(); ++k) {
+      const auto s = static_cast<std::size_t>(si->values[k]);
+      ASSERT_EQ(oc->values[k], cls[s]) << "point " << k;
+      ASSERT_EQ(ot->values[k], time[s]) << "point " << k;
+      ASSERT_NE(of->values[k], 200.0) << "the filter's flags, not the input's";
+    }
+  }
 }
 
 }  // namespace

@@ -57,6 +57,14 @@ void expect_same(const PointCloud& a, const PointCloud& b, std::size_t a0 = 0) {
       ASSERT_EQ(a.colors[a0 + i], b.colors[i]);
     }
   }
+  ASSERT_EQ(a.attributes.size(), b.attributes.size());
+  for (std::size_t k = 0; k < a.attributes.size(); ++k) {
+    ASSERT_EQ(a.attributes[k].name, b.attributes[k].name);
+    ASSERT_EQ(a.attributes[k].type, b.attributes[k].type) << a.attributes[k].name;
+    for (std::size_t i = 0; i < b.size(); ++i)
+      ASSERT_EQ(a.attributes[k].values[a0 + i], b.attributes[k].values[i])
+          << a.attributes[k].name << ", point " << i;
+  }
 }
 
 TEST(PointStream, BinaryPlyRangesMatchTheWholeFileReader) {
@@ -120,6 +128,70 @@ TEST(PointStream, BinaryPcdMatchesTheWholeFileReader) {
   s->read(123, 200, part);
   ASSERT_EQ(part.size(), 200u);
   expect_same(whole, part, 123);
+  fs::remove_all(d);
+}
+
+// The fields map to the cloud as the whole-file readers map them: normals named normal_x ...,
+// colours stored as floats in [0, 1], and every other field (of every type, a second field of
+// one name left out) as an attribute of its name and type, in file order.
+TEST(PointStream, FieldsMapAsInTheWholeFileReaders) {
+  const fs::path d = temp_dir("fields");
+  std::string ply =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+      "property float y\nproperty float z\nproperty uchar classification\n"
+      "property float normal_x\nproperty float normal_y\nproperty float normal_z\n"
+      "property float red\nproperty float green\nproperty float blue\nproperty double gps_time\n"
+      "property short scan\nproperty ushort ret\nproperty char tag\nproperty uchar "
+      "classification\nend_header\n";
+  for (int i = 0; i < 4; ++i) {
+    const float f[3] = {0.5f * i, 1.0f, -2.0f};
+    for (float v : f) ply += test::bytes_le(v);
+    ply += std::string(1, static_cast<char>(2 + i));
+    for (float v : {0.0f, 0.6f, 0.8f}) ply += test::bytes_le(v);
+    for (float v : {0.25f * i, 1.0f, 0.5f}) ply += test::bytes_le(v);
+    ply += test::bytes_le(1.0e9 + 0.125 * i);
+    ply += test::bytes_le(static_cast<std::int16_t>(-300 + i));
+    ply += test::bytes_le(static_cast<std::uint16_t>(60000 + i));
+    ply += std::string(1, static_cast<char>(-5 - i));
+    ply += std::string(1, static_cast<char>(99));
+  }
+  test::write_bytes(d / "f.ply", ply);
+  const PointCloud whole = read_ply(d / "f.ply");
+  const auto s = PointStream::open(d / "f.ply");
+  EXPECT_TRUE(s->has_normals());
+  EXPECT_TRUE(s->has_colors());
+  const std::vector<std::pair<std::string, AttributeType>> attrs = {
+      {"classification", AttributeType::kUInt8},
+      {"gps_time", AttributeType::kFloat64},
+      {"scan", AttributeType::kInt32},
+      {"ret", AttributeType::kUInt32},
+      {"tag", AttributeType::kInt32}};
+  EXPECT_EQ(s->attributes(), attrs);
+  PointCloud part;
+  s->read(1, 3, part);
+  ASSERT_EQ(part.size(), 3u);
+  expect_same(whole, part, 1);
+  EXPECT_EQ(part.colors[0], (std::array<std::uint8_t, 4>{64, 255, 128, 255}));
+  EXPECT_EQ(part.attributes[0].values[0], 3.0);  // the first "classification"
+
+  // PCD: COUNT 1 fields only, "_" is padding, rgb packed, the rest attributes.
+  PointCloud cloud = random_cloud(50, 3);
+  cloud.confidences.clear();
+  std::vector<double> label(50), curvature(50);
+  for (std::size_t i = 0; i < 50; ++i) {
+    label[i] = static_cast<double>(i * 1000);
+    curvature[i] = 0.5 / static_cast<double>(i + 1);
+  }
+  cloud.set_attribute("label", AttributeType::kUInt32, label);
+  cloud.set_attribute("curvature", AttributeType::kFloat32, curvature);
+  write_pcd(d / "c.pcd", cloud, "binary");
+  const PointCloud pcd_whole = read_pcd(d / "c.pcd");
+  const auto p = PointStream::open(d / "c.pcd");
+  ASSERT_EQ(p->attributes().size(), pcd_whole.attributes.size());
+  ASSERT_FALSE(p->attributes().empty());
+  p->read(10, 30, part);
+  ASSERT_EQ(part.size(), 30u);
+  expect_same(pcd_whole, part, 10);
   fs::remove_all(d);
 }
 

@@ -42,6 +42,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "scanclean/core/point_cloud.h"
@@ -55,6 +56,9 @@ namespace scanclean {
 //! record numbers. Must be callable from any thread (see io/point_stream.h).
 struct TiledSource {
   std::uint64_t records = 0;
+  //! The attributes every read() fills, in this order (name, type; PointStream::attributes()):
+  //! the tiles carry them to the outputs as the in-memory filter does.
+  std::vector<std::pair<std::string, AttributeType>> attributes;
   std::function<void(std::uint64_t first, std::uint64_t count, PointCloud& out,
                      std::vector<std::uint64_t>& records)>
       read;
@@ -90,11 +94,13 @@ struct TiledOptions {
 void validate(const TiledOptions& options);
 
 //! Points a tile may hold (halo included) under the budget: what the filter needs per point,
-//! measured (docs/SCALING.md).
-std::uint64_t tile_point_limit(std::size_t memory_budget);
+//! measured (docs/SCALING.md), plus 24 bytes per point for each attribute the input carries
+//! (three copies of a double).
+std::uint64_t tile_point_limit(std::size_t memory_budget, std::size_t attributes = 0);
 
-//! Bytes the in-memory filter is expected to need for n points (for the decision to tile).
-std::uint64_t in_memory_bytes(std::uint64_t points);
+//! Bytes the in-memory filter is expected to need for n points with that many attributes (for
+//! the decision to tile).
+std::uint64_t in_memory_bytes(std::uint64_t points, std::size_t attributes = 0);
 
 //! The global choices every tile makes the same (pass 1-3).
 struct TiledGlobals {

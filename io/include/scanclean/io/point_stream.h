@@ -6,11 +6,14 @@
 //! never the whole file), so that many threads or processes can read disjoint ranges of one file
 //! at the same time.
 //!
-//! Record i is the i-th vertex (PLY) or point (PCD) of the file. Fields read: x y z (required,
-//! any numeric type), normals (PLY nx ny nz, PCD normal_x normal_y normal_z), confidence,
-//! intensity and colours (PLY red green blue [alpha] uchar; PCD rgb / rgba packed). Other fields
-//! are skipped. Records with a non-finite x, y or z are dropped like the whole-file readers do;
-//! read() returns the record index of every point it keeps.
+//! Record i is the i-th vertex (PLY) or point (PCD) of the file. The fields map to the cloud as
+//! the whole-file readers map them (read_ply, read_pcd): x y z (required, any numeric type);
+//! normals (nx ny nz, else normal_x normal_y normal_z); confidence; intensity; colours (PLY red
+//! green blue [alpha], else diffuse_red ..., integers 0-255 or floats in [0, 1]; PCD rgb / rgba
+//! packed); every other scalar field (PCD: COUNT 1, not "_") becomes an Attribute of the same
+//! name and type, in file order (attributes()). The first of two fields with one name is used.
+//! Records with a non-finite x, y or z are dropped like the whole-file readers do; read()
+//! returns the record index of every point it keeps.
 //!
 //! Not streamable (an InputError says so and names the whole-file reader to use instead): ASCII
 //! PLY or PCD, binary_compressed PCD, list properties in the PLY vertex element, or a PLY element
@@ -24,6 +27,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "scanclean/core/point_cloud.h"
@@ -51,6 +55,10 @@ class PointStream {
   bool has_confidences() const { return confidence_ >= 0; }
   bool has_intensities() const { return intensity_ >= 0; }
   bool has_colors() const { return colors_; }
+  //! The attributes every read() fills (name, type), in file order: the fields above take none.
+  const std::vector<std::pair<std::string, AttributeType>>& attributes() const {
+    return attribute_types_;
+  }
 
   //! Reads records [first, first + count) (clipped to size()) into `out` (replaced), dropping
   //! non-finite points; `records` (optional) receives the record index of each point kept.
@@ -86,8 +94,11 @@ class PointStream {
   bool normals_ = false;
   Field conf_{}, inten_{};
   int confidence_ = -1, intensity_ = -1;
-  std::array<Field, 4> rgba_{};  // PLY: red green blue alpha (uchar); PCD: packed in rgba_[0]
+  std::array<Field, 4> rgba_{};  // PLY: red green blue [alpha]; PCD: packed in rgba_[0]
   bool colors_ = false;
+  bool packed_colour_ = false;  // PCD rgb / rgba packed in rgba_[0]
+  std::vector<Field> attribute_fields_;
+  std::vector<std::pair<std::string, AttributeType>> attribute_types_;
   bool packed_alpha_ = false;  // PCD rgba (else rgb: alpha 255)
   friend struct PointStreamParser;
 };
