@@ -34,6 +34,11 @@ void read_all(const scanclean::PointStream& s) {
       s.for_each_chunk(b, e - b, 5,
                        [&](const scanclean::PointCloud& c, const std::vector<std::uint64_t>& rec) {
                          check(rec.size() == c.size());
+                         // Every chunk holds the announced attributes, a value per point.
+                         check(c.attributes.size() == s.attributes().size());
+                         for (std::size_t a = 0; a < c.attributes.size(); ++a)
+                           check(c.attributes[a].name == s.attributes()[a].first &&
+                                 c.attributes[a].values.size() == c.size());
                          for (std::size_t i = 0; i < c.size(); ++i) {
                            check(rec[i] >= b && rec[i] < e);
                            check(first || rec[i] > last);
