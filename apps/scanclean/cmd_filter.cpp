@@ -63,14 +63,18 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
   if (!c.scratch.empty()) t.scratch = c.scratch;
   validate(t);
   const std::string& in = c.inputs.front();
-  if (!PointStream::streamable(in)) {
+  std::unique_ptr<PointStream> stream;
+  try {
+    stream = PointStream::open(in);  // the header only
+  } catch (const std::exception&) {  // not streamable (PointStream::streamable's rule)
+  }
+  if (!stream) {
     if (c.tiled)
       throw OptionError(
           "filter: --tiled needs a binary PLY or binary PCD input (streamed by "
           "byte ranges); convert it with scanclean convert");
     return -1;
   }
-  const auto stream = PointStream::open(in);
   const auto records = stream->size();
   if (!c.tiled && in_memory_bytes(records, stream->attributes().size()) <= t.memory_budget)
     return -1;

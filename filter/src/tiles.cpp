@@ -417,14 +417,21 @@ void validate(const TiledOptions& t) {
 // Measured on the scaling benchmark's scenes (docs/SCALING.md): the filter's own peak
 // plus the tile's input and result copies, about 330 bytes per point, and 192 MiB for the
 // histogram, the read buffers and the program.
+namespace {
+// The filter's bytes per point with that many attributes (three copies of a double each).
+std::uint64_t bytes_per_point(std::size_t attributes) {
+  return 330 + 24 * std::uint64_t{attributes};
+}
+}  // namespace
+
 std::uint64_t tile_point_limit(std::size_t budget, std::size_t attributes) {
   const std::uint64_t fixed = std::uint64_t{192} << 20;
-  const std::uint64_t per_point = 330 + 24 * std::uint64_t{attributes};
-  return budget > fixed + (std::uint64_t{16} << 20) ? (budget - fixed) / per_point : 50000;
+  return budget > fixed + (std::uint64_t{16} << 20) ? (budget - fixed) / bytes_per_point(attributes)
+                                                    : 50000;
 }
 
 std::uint64_t in_memory_bytes(std::uint64_t points, std::size_t attributes) {
-  return points * (330 + 24 * std::uint64_t{attributes}) + (std::uint64_t{64} << 20);
+  return points * bytes_per_point(attributes) + (std::uint64_t{64} << 20);
 }
 
 TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const TiledOptions& t,

@@ -97,9 +97,9 @@ class PointStream {
   std::array<Field, 4> rgba_{};  // PLY: red green blue [alpha]; PCD: packed in rgba_[0]
   bool colors_ = false;
   bool packed_colour_ = false;  // PCD rgb / rgba packed in rgba_[0]
+  bool packed_alpha_ = false;   // PCD rgba (else rgb: alpha 255)
   std::vector<Field> attribute_fields_;
   std::vector<std::pair<std::string, AttributeType>> attribute_types_;
-  bool packed_alpha_ = false;  // PCD rgba (else rgb: alpha 255)
   friend struct PointStreamParser;
 };
 
