@@ -121,6 +121,10 @@ FarSplit split_far_points(const PointCloud& input) {
     const bool inside = (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all();
     (inside ? split.near : split.far).push_back(i);
   }
+  // No point in the box: there is no bulk to keep the others apart from (a few points, whose
+  // percentiles are single points). One group, so that the far group's own split, which
+  // run_split makes next, always has fewer points than the cloud it came from.
+  if (split.near.empty()) std::swap(split.near, split.far);
   return split;
 }
 

@@ -35,7 +35,8 @@ struct Coincident {
 Coincident find_coincident(const PointCloud& input);
 
 //! The indices of the bulk (near) and of the far points (increasing). far is empty when no point
-//! lies outside the grown percentile box.
+//! lies outside the grown percentile box, and when none lies inside it (then there is no bulk:
+//! all points are near), so that far is always smaller than the input.
 struct FarSplit {
   std::vector<std::size_t> near, far;
 };

@@ -121,5 +121,24 @@ TEST(InputGroupsTest, AFarClusterIsFilteredOnItsOwn) {
   EXPECT_EQ(r.stats.h, alone.stats.h);
 }
 
+// A few points have no bulk: the percentiles of three points are single points, so the box held
+// one of them and the other two, split again, fell outside their own box (no point inside) and
+// were split for ever (a stack overflow: `scanclean filter` on a 3-point triangle crashed).
+TEST(InputGroupsTest, AFewPointsWithoutABulkAreOneGroup) {
+  PointCloud two;
+  two.positions = {{1, 0, 0}, {0, 1, 0}};
+  const detail::FarSplit split = detail::split_far_points(two);
+  EXPECT_EQ(split.near.size(), 2u);
+  EXPECT_TRUE(split.far.empty());
+  for (std::size_t n : {2u, 3u, 4u, 5u, 7u}) {
+    PointCloud c;
+    for (std::size_t i = 0; i < n; ++i)
+      c.positions.emplace_back(static_cast<double>(i % 2), static_cast<double>(i / 2 % 2),
+                               static_cast<double>(i / 4));
+    const FilterResult r = robust_filter(c);
+    EXPECT_EQ(total_merge_count(r) + r.outliers.size(), n) << n << " points";
+  }
+}
+
 }  // namespace
 }  // namespace scanclean
