@@ -10,33 +10,64 @@ namespace {
 typedef double V4d __attribute__((vector_size(32)));
 typedef long long V4l __attribute__((vector_size(32)));
 
-// Three accumulators of four lanes: (t x, t y, t z, t), (t x x, t y y, t z z, -), and
-// (t x y, t x z, t y z, -); every lane is one of the scalar sums, added in sample order.
+// Four samples at a time, transposed to (x0 x1 x2 x3), (y...), (z...), (t...): lane l holds
+// the partial sums of the samples k = l mod 4 (fit_sums_scalar's sets), added in sample order;
+// the few samples past the last multiple of four go to lanes 0, 1, 2 alone. The lanes are
+// combined as (0 + 1) + (2 + 3).
 [[gnu::always_inline]] inline FitSums sums_impl(const FitSample* q, std::size_t n) {
   static_assert(sizeof(FitSample) == sizeof(V4d), "a sample is four doubles");
-  V4d a{}, b{}, c{};
-  for (std::size_t k = 0; k < n; ++k) {
-    V4d v;  // x y z t
-    std::memcpy(&v, &q[k], sizeof v);
-    V4d xyz1 = v;
-    xyz1[3] = 1.0;
-    const V4d t = V4d{} + v[3];
-    const V4d tx = t * xyz1;  // t x, t y, t z, t
-    a += tx;
-    b += tx * xyz1;
-    c += __builtin_shuffle(tx, V4l{0, 0, 1, 1}) * __builtin_shuffle(v, V4l{1, 2, 2, 2});
+  V4d s0{}, sx{}, sy{}, sz{}, sxx{}, syy{}, szz{}, sxy{}, sxz{}, syz{};
+  auto add = [&](V4d x, V4d y, V4d z, V4d t) {
+    const V4d tx = t * x, ty = t * y, tz = t * z;
+    s0 += t;
+    sx += tx;
+    sy += ty;
+    sz += tz;
+    sxx += tx * x;
+    syy += ty * y;
+    szz += tz * z;
+    sxy += tx * y;
+    sxz += tx * z;
+    syz += ty * z;
+  };
+  std::size_t k = 0;
+  for (; k + 4 <= n; k += 4) {
+    // Four loads into separate vectors (an array would go through the stack), rows: samples
+    // (x y z t); then a 4 x 4 transpose to columns: fields.
+    V4d r0, r1, r2, r3;
+    std::memcpy(&r0, &q[k], sizeof r0);
+    std::memcpy(&r1, &q[k + 1], sizeof r1);
+    std::memcpy(&r2, &q[k + 2], sizeof r2);
+    std::memcpy(&r3, &q[k + 3], sizeof r3);
+    const V4d a = __builtin_shuffle(r0, r1, V4l{0, 4, 2, 6});  // x0 x1 z0 z1
+    const V4d b = __builtin_shuffle(r0, r1, V4l{1, 5, 3, 7});  // y0 y1 t0 t1
+    const V4d c = __builtin_shuffle(r2, r3, V4l{0, 4, 2, 6});  // x2 x3 z2 z3
+    const V4d d = __builtin_shuffle(r2, r3, V4l{1, 5, 3, 7});  // y2 y3 t2 t3
+    add(__builtin_shuffle(a, c, V4l{0, 1, 4, 5}), __builtin_shuffle(b, d, V4l{0, 1, 4, 5}),
+        __builtin_shuffle(a, c, V4l{2, 3, 6, 7}), __builtin_shuffle(b, d, V4l{2, 3, 6, 7}));
   }
+  if (k < n) {  // the rest in lanes 0.., zero weight (adds exact zeros) in the others
+    V4d x{}, y{}, z{}, t{};
+    for (std::size_t l = 0; k + l < n; ++l) {
+      x[l] = q[k + l].x;
+      y[l] = q[k + l].y;
+      z[l] = q[k + l].z;
+      t[l] = q[k + l].t;
+    }
+    add(x, y, z, t);
+  }
+  auto total = [](V4d v) { return (v[0] + v[1]) + (v[2] + v[3]); };
   FitSums s;
-  s.sx = a[0];
-  s.sy = a[1];
-  s.sz = a[2];
-  s.s0 = a[3];
-  s.sxx = b[0];
-  s.syy = b[1];
-  s.szz = b[2];
-  s.sxy = c[0];
-  s.sxz = c[1];
-  s.syz = c[2];
+  s.s0 = total(s0);
+  s.sx = total(sx);
+  s.sy = total(sy);
+  s.sz = total(sz);
+  s.sxx = total(sxx);
+  s.syy = total(syy);
+  s.szz = total(szz);
+  s.sxy = total(sxy);
+  s.sxz = total(sxz);
+  s.syz = total(syz);
   return s;
 }
 
@@ -60,8 +91,9 @@ FitSums fit_sums(const FitSample* samples, std::size_t n) {
 }
 
 FitSums fit_sums_scalar(const FitSample* samples, std::size_t n) {
-  FitSums s;
+  FitSums set[4];
   for (std::size_t k = 0; k < n; ++k) {
+    FitSums& s = set[k % 4];
     const FitSample& q = samples[k];
     const double t = q.t;
     s.s0 += t;
@@ -75,6 +107,11 @@ FitSums fit_sums_scalar(const FitSample* samples, std::size_t n) {
     s.sxz += t * q.x * q.z;
     s.syz += t * q.y * q.z;
   }
+  FitSums s;
+  for (double FitSums::*f :
+       {&FitSums::s0, &FitSums::sx, &FitSums::sy, &FitSums::sz, &FitSums::sxx, &FitSums::syy,
+        &FitSums::szz, &FitSums::sxy, &FitSums::sxz, &FitSums::syz})
+    s.*f = (set[0].*f + set[1].*f) + (set[2].*f + set[3].*f);
   return s;
 }
 

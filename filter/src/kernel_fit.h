@@ -28,8 +28,9 @@ struct FitSample {
 };
 
 //! The weighted sums of the fit (eq. 2) over samples: sum t, sum t x, ..., sum t x x, ...,
-//! sum t x y, each summed in sample order as sequential doubles, and each product formed as
-//! (t x) y. The vector path (4 doubles a lane, AVX2 when the CPU has it) does the very same
+//! sum t x y, each product formed as (t x) y. Each sum is four partial sums in double (sample k
+//! in partial k mod 4, in sample order), combined as (0 + 1) + (2 + 3): independent additions
+//! for the vector path (4 doubles a lane, AVX2 when the CPU has it), which does the very same
 //! operations per sum, so it gives the scalar loop's results bit for bit.
 struct FitSums {
   double s0 = 0, sx = 0, sy = 0, sz = 0;
