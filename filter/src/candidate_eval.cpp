@@ -114,7 +114,7 @@ template <class V, class VI, bool kReuse>
   float emin = inf;
   for (int l = 0; l < W; ++l) emin = std::min(emin, vmin[l]);
   if (!(emin < inf)) return false;
-  V as{}, adx{}, ady{}, adz{}, anx{}, any{}, anz{};
+  V as{}, adx{}, ady{}, adz{}, anx{}, any{}, anz{}, al{};
   const V emv = V{} + emin;
   const V rx = V{} + nref[0], ry = V{} + nref[1], rz = V{} + nref[2];
   for (std::size_t j = 0; j < n; j += W) {
@@ -130,6 +130,8 @@ template <class V, class VI, bool kReuse>
     const V nz = load<V, VI>(&b.f[CandidateBuffer::kNz][j]);
     const V od = om * d;
     const V os = (nx * rx + ny * ry + nz * rz) < 0.0f ? -om : om;  // s_j omega_j
+    const V slab = load<V, VI>(&b.f[CandidateBuffer::kH2][j]) - d * d;
+    al += slab > 0.0f ? om * slab : V{};
     as += om;
     adx += od * nx;
     ady += od * ny;
@@ -148,6 +150,7 @@ template <class V, class VI, bool kReuse>
     out.n[0] += anx[l];
     out.n[1] += any[l];
     out.n[2] += anz[l];
+    out.slab_sum += al[l];
   }
   return true;
 }
@@ -328,6 +331,10 @@ bool have_avx2() {
 }
 
 }  // namespace
+
+double StepSums::likelihood() const {
+  return std::exp(-0.5 * static_cast<double>(e_min)) * slab_sum;
+}
 
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out) {

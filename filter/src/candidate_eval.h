@@ -76,7 +76,11 @@ struct StepSums {
   double s = 0;              // sum omega
   double dn[3] = {0, 0, 0};  // sum omega d n
   double n[3] = {0, 0, 0};   // sum omega n
+  double slab_sum = 0;       // sum omega max(0, h2_j - d_j^2): L = exp(-e_min / 2) slab_sum
   float e_min = 0;
+  //! L(x) at the x of these sums (likelihood() there, up to rounding) when every kernel that
+  //! L keeps is also kept by the step, i.e. when the slab test is |d_j| < slab h_j with slab >= 1.
+  double likelihood() const;
 };
 
 //! Appends the kernels records[slots[k]], k < n, with centres relative to origin; AVX2
@@ -86,7 +90,7 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
 
 //! One iteration's sums at x (relative to the local origin). Returns false if no kernel is kept
 //! (e_j < t2 and d_j^2 < slab2_j). Fills buffer.f[kE] and buffer.d. The normal sum uses
-//! s_j n_j with s_j = sign(n_j . nref).
+//! s_j n_j with s_j = sign(n_j . nref); the likelihood's sum comes with them (StepSums).
 bool step_sums(CandidateBuffer& buffer, const float x[3], const float nref[3], float t2,
                StepSums& out);
 //! step_sums at the x of the min_mahalanobis call just before (no other call in between):

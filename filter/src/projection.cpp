@@ -15,9 +15,10 @@ struct ProjectionContext {
   std::uint64_t cell_key = 0;  // the kernel index's key in the thread-local cell caches
   const KernelSet* ks = nullptr;
   const FilterOptions* o = nullptr;
-  float t2 = 9;     // truncation_sigma^2
-  float slab2 = 1;  // slab^2
-  double gather_factor = 1.25;
+  float t2 = 9;                // truncation_sigma^2
+  float slab2 = 1;             // slab^2
+  bool l_from_step = true;     // slab >= 1: the step keeps every kernel L keeps (StepSums)
+  double gather_factor = 1;    // candidate_radius
   OffSurfaceTest off_surface;  // threshold2 = 0: off
 };
 
@@ -37,8 +38,7 @@ bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float 
 }
 
 // The candidate kernels of a point at `of`: every kernel whose centre lies within
-// gather_factor h (a superset of those the truncation keeps while the point moves by less than
-// a quarter of h), relative to `of`.
+// gather_factor h (candidate_radius), relative to `of`.
 void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
             CandidateBuffer& buf) {
   const KernelSet& ks = *ctx.ks;
@@ -82,7 +82,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   thread_local B buf;
   const FilterOptions& o = *ctx.o;
   PointOutcome out;
-  const double tol = o.tolerance * h, regather = 0.25 * h;
+  const double tol = o.tolerance * h, regather = kRegatherMargin * h;
   bool have_ref = nref.squaredNorm() > 0.5f;
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
@@ -103,7 +103,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     first_step_ready = true;
   }
   // x relative to the candidates' origin, in float; the candidates are gathered again around x
-  // once it has moved by more than a quarter of h from where they were gathered.
+  // once it has moved by more than kRegatherMargin h from where they were gathered.
   auto local_position = [&](float xf[3]) {
     if ((x - origin).norm() > regather) {
       of = x.cast<float>();
@@ -119,6 +119,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   Eigen::Vector3f nbar_out = nref;
   const Eigen::Vector3d start = x;
   double prev_mu = 0;
+  double L = 0;  // at the last iterate where the sums were formed
   constexpr double kMaxRatio = 0.8;
   for (int k = 0; k < o.max_iterations; ++k) {
     float xf[3];
@@ -143,6 +144,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       have_ref = true;
       step_sums(buf, xf, nref.data(), ctx.t2, s);
     }
+    L = s.likelihood();
     const Eigen::Vector3d m(s.dn[0] / s.s, s.dn[1] / s.s, s.dn[2] / s.s);
     Eigen::Vector3d nb(s.n[0], s.n[1], s.n[2]);
     const double nb_len = nb.norm();
@@ -171,9 +173,15 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       break;
     }
   }
-  float xf[3];
-  local_position(xf);
-  out.L = static_cast<float>(likelihood(buf, xf, ctx.t2));
+  if (ctx.l_from_step) {
+    // L where the last sums were formed: the last step of a converged point moved it by less
+    // than the tolerance, so evaluating L again there would cost a pass for nothing.
+    out.L = static_cast<float>(L);
+  } else {
+    float xf[3];
+    local_position(xf);
+    out.L = static_cast<float>(likelihood(buf, xf, ctx.t2));
+  }
   out.iterations = static_cast<std::uint8_t>(std::min(iters, 255));
   out.state = converged ? ProjectionState::kConverged : ProjectionState::kNotConverged;
   out.normal = nbar_out;
@@ -181,6 +189,10 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
 }
 
 }  // namespace
+
+double candidate_radius(const FilterOptions& o) {
+  return std::max(1.0, o.truncation_sigma / 3.0) + kRegatherMargin;
+}
 
 void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen::Vector3f>& nref,
                  const FilterOptions& o, bool off_surface_test, bool oriented,
@@ -192,7 +204,8 @@ void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen
   ctx.o = &o;
   ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
   ctx.slab2 = static_cast<float>(o.slab * o.slab);
-  ctx.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
+  ctx.l_from_step = o.slab >= 1;
+  ctx.gather_factor = candidate_radius(o);
   ctx.off_surface.kernels = &ks;
   if (off_surface_test && !ks.fits.empty())
     ctx.off_surface.threshold2 = static_cast<float>(o.outlier_sigma * o.outlier_sigma);

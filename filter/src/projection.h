@@ -36,6 +36,15 @@ struct Projected {
   std::vector<Eigen::Vector3f> normal;  //!< n_bar at the end, oriented like the reference
 };
 
+//! A point's candidate kernels are those whose centres lie within candidate_radius(o) h of where
+//! they were gathered; they are gathered again once the point has moved by more than
+//! kRegatherMargin h from there. So the kernels within max(1, truncation_sigma / 3) h of the
+//! point, the reach of the truncated kernels of a neighbourhood of radius h, are always among
+//! them. A narrow margin keeps the lists short (every iteration evaluates every candidate); a
+//! point that moves farther gathers again.
+constexpr double kRegatherMargin = 1.0 / 16;
+double candidate_radius(const FilterOptions& o);
+
 //! Projects every point x[i] of d (in place), with kernels ks. `nref` holds each point's own
 //! kernel normal (zero if none): the reference orientation where d has no sensor normal.
 //! `sparse[i]` != 0 drops point i before the projection (state kSparse). With

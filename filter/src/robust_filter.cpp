@@ -237,7 +237,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   prm.options = &o;
   prm.oriented = use_v;
   prm.cell = h;
-  prm.gather_factor = 1.25 * std::max(1.0, o.truncation_sigma / 3.0);
+  prm.gather_factor = detail::candidate_radius(o);
   prm.stride = kernel_stride(o, h, st.h0);
   if (o.scale == ScaleMode::kAuto) prm.noise_sigma = std::max(st.noise_sigma, o.eigen_floor * h);
   st.kernel_stride = static_cast<int>(prm.stride);

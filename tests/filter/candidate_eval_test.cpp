@@ -113,6 +113,8 @@ TEST(CandidateEvalTest, VectorisedLoopsMatchTheScalarReference) {
         EXPECT_NEAR(s.dn[a], r.dn[a], 1e-4 * r.s * 0.01) << "trial " << trial << " axis " << a;
         EXPECT_NEAR(s.n[a], r.n[a], 1e-4 * r.s) << "trial " << trial << " axis " << a;
       }
+      // The likelihood summed with the step (slab 1: the same kernels).
+      EXPECT_NEAR(s.likelihood(), r.likelihood, 1e-4 * r.likelihood + 1e-12) << "trial " << trial;
     }
     EXPECT_NEAR(likelihood(buf, xf, t2), r.likelihood, 1e-4 * r.likelihood + 1e-12)
         << "trial " << trial;
@@ -145,6 +147,7 @@ TEST(CandidateEvalTest, StepAfterMinMahalanobisEqualsAFreshStepBitForBit) {
     ++kept_trials;
     EXPECT_EQ(fresh.e_min, reused.e_min) << "trial " << trial;
     EXPECT_EQ(fresh.s, reused.s) << "trial " << trial;
+    EXPECT_EQ(fresh.slab_sum, reused.slab_sum) << "trial " << trial;
     for (int a = 0; a < 3; ++a) {
       EXPECT_EQ(fresh.dn[a], reused.dn[a]) << "trial " << trial << " axis " << a;
       EXPECT_EQ(fresh.n[a], reused.n[a]) << "trial " << trial << " axis " << a;
