@@ -18,17 +18,24 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   const FilterOptions& o = *prm.options;
   const std::size_t stride = std::max<std::size_t>(1, prm.stride);
   // Kernel candidates: i = k stride, or the given sites (slot[i] = k).
+  auto stride_at = [&](std::size_t i) {
+    return prm.strides && !prm.sites ? std::size_t{(*prm.strides)[i]} : stride;
+  };
+  auto is_site = [&](std::size_t i) {
+    return prm.sites ? (*prm.sites)[i] != 0 : i % stride_at(i) == 0;
+  };
   std::vector<std::uint32_t> slot;
   std::size_t nk = (n + stride - 1) / stride;
-  if (prm.sites) {
+  const bool listed = prm.sites || prm.strides;
+  if (listed) {
     slot.resize(n);
     nk = 0;
     for (std::size_t i = 0; i < n; ++i) {
       slot[i] = static_cast<std::uint32_t>(nk);
-      nk += (*prm.sites)[i] ? 1 : 0;
+      nk += is_site(i) ? 1 : 0;
     }
   }
-  auto candidate = [&](std::size_t i) { return prm.sites ? slot[i] : i / stride; };
+  auto candidate = [&](std::size_t i) { return listed ? slot[i] : i / stride; };
   std::vector<std::uint8_t> valid(nk, 0);
   std::vector<KernelRecord> records(nk);  // candidate order first
   std::vector<KernelFitRecord> fits(prm.keep_fits ? nk : 0);
@@ -44,7 +51,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   const std::uint64_t cell_key = new_cell_cache_key();
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     // d is in grid order: a spatially even subsample
-    if (prm.sites ? !(*prm.sites)[i] : i % stride != 0) return;
+    if (!is_site(i)) return;
     const double h = d.hi_at(i);
     const Eigen::Vector3f qi =
         by_slot ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
@@ -78,7 +85,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     for (int a = 0; a < 3; ++a) inv[a] = 1.0 / std::max(fit.lambda[a], floor2 * h2);
     const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
     const std::size_t k = candidate(i);
-    records[k].set(fit.c, s_inv, fit.n, h2, d.w_at(i) * static_cast<float>(stride));
+    records[k].set(fit.c, s_inv, fit.n, h2, d.w_at(i) * static_cast<float>(stride_at(i)));
     if (prm.keep_fits) fits[k].set(fit.m, fit.weight, fit.cov);
     valid[k] = 1;
   });

@@ -43,6 +43,10 @@ struct KernelParams {
   //! every stride-th, still weighted x stride. The tiled filter passes the whole cloud's
   //! subsample this way (kKernelSitesAttribute).
   const std::vector<std::uint8_t>* sites = nullptr;
+  //! When set (one per point of d, and no sites): each point's own kernel stride (kernel_sites.h)
+  //! instead of `stride`: a kernel at the points whose index in d is a multiple of it, weighted
+  //! x it.
+  const std::vector<std::uint8_t>* strides = nullptr;
 };
 
 //! The input attribute (0/1 per point) by which the tiled filter names the points that carry a

@@ -26,12 +26,13 @@ std::uint32_t find_root(std::vector<std::uint32_t>& parent, std::uint32_t a) {
 
 }  // namespace
 
-std::vector<std::uint8_t> sparse_support(const std::vector<float>& support, double tau) {
+std::vector<std::uint8_t> sparse_support(const std::vector<float>& support, double tau,
+                                         const std::vector<std::uint8_t>* strides) {
   std::vector<std::uint8_t> sparse(support.size(), 0);
   if (support.empty() || !(tau > 0)) return sparse;
   std::vector<float> v;
-  for (float f : support)
-    if (f >= 0) v.push_back(f);
+  for (std::size_t i = 0; i < support.size(); ++i)
+    if (support[i] >= 0) v.insert(v.end(), strides ? (*strides)[i] : 1, support[i]);
   const double limit = tau * static_cast<double>(median_of(std::move(v)));
   parallel_each(support.size(), [&](std::size_t i) {
     if (support[i] >= 0 && support[i] < limit) sparse[i] = 1;

@@ -22,7 +22,12 @@ namespace scanclean::detail {
 //! within about h / 2, where a surface holds a quarter of its h-ball but volumetric clutter only
 //! an eighth. Uniform clutter collapses into dense clumps under the projection and then passes
 //! the density test on the output. Points without a kernel are left to the output tests.
-std::vector<std::uint8_t> sparse_support(const std::vector<float>& support, double tau);
+//! `strides` (optional, one per point): the local kernel strides (kernel_sites.h); a kernel's
+//! support then counts as often in the median as the points it stands for, so that thinning the
+//! kernels where points are dense leaves the median, and the limit, where a kernel at every point
+//! would put them.
+std::vector<std::uint8_t> sparse_support(const std::vector<float>& support, double tau,
+                                         const std::vector<std::uint8_t>* strides = nullptr);
 
 //! Why a representative was removed.
 enum class Removal : std::uint8_t {

@@ -14,6 +14,7 @@
 
 #include "clustering.h"
 #include "input_groups.h"
+#include "kernel_sites.h"
 #include "kernels.h"
 #include "neighbor_index.h"
 #include "outlier_tests.h"
@@ -252,11 +253,17 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
     for (std::size_t s = 0; s < N; ++s) sites[s] = a->values[input_index[s]] != 0 ? 1 : 0;
     prm.sites = &sites;
   }
+  std::vector<std::uint8_t> strides;  // the local kernel strides (kernel_sites.h), grid order
+  if (!prm.sites && o.kernel_stride == 0 && o.scale != ScaleMode::kAdaptive) {
+    strides = detail::local_kernel_strides(*index, prm.stride);
+    prm.strides = &strides;
+  }
   detail::KernelSet ks =
       detail::build_kernels(d, index, detail::PointIndexIds::kSlots, prm, nref, "kernels");
   prm.keep_fits = false;
   prm.support = nullptr;
   prm.sites = nullptr;
+  prm.strides = nullptr;
   std::vector<std::uint8_t>().swap(sites);
   std::vector<Eigen::Vector3d> x = std::move(d.p);  // projected positions, initially the input
   st.kernels = ks.fitted;
@@ -273,9 +280,11 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
       if (d.has_v(i)) nref[i] = d.v[i];
     std::vector<Eigen::Vector3f>().swap(d.v);
   }
-  std::vector<std::uint8_t> sparse = detail::sparse_support(support, o.tau);
+  std::vector<std::uint8_t> sparse =
+      detail::sparse_support(support, o.tau, strides.empty() ? nullptr : &strides);
   if (sparse.empty()) sparse.assign(N, 0);
   std::vector<float>().swap(support);
+  std::vector<std::uint8_t>().swap(strides);
   detail::Projected pr;
   detail::project_all(d, ks, nref, o, true, use_v, sparse, x, pr, "projection");
   st.seconds_projection += seconds_since(t);

@@ -104,5 +104,35 @@ TEST(KernelsTest, StrideKeepsEveryStrideThPointWithItsWeightScaled) {
     EXPECT_EQ(nref[i].squaredNorm() > 0, i % 3 == 0) << i;
 }
 
+TEST(KernelsTest, LocalStridesPlaceKernelsAtTheirMultiplesWeightedByThem) {
+  const double h = 0.008;
+  Fixture f = plane(h);
+  FilterOptions o;
+  KernelParams prm;
+  prm.options = &o;
+  prm.cell = h;
+  std::vector<std::uint8_t> strides(f.d.p.size());
+  for (std::size_t i = 0; i < strides.size(); ++i)
+    strides[i] = static_cast<std::uint8_t>(1 + (i / 500) % 4);  // runs of 1, 2, 3, 4
+  prm.strides = &strides;
+  std::vector<Eigen::Vector3f> nref;
+  const KernelSet ks = build_kernels(f.d, f.index, PointIndexIds::kSlots, prm, nref, "kernels");
+  double weight = 0, expected = 0;
+  std::size_t sites = 0;
+  for (std::size_t i = 0; i < nref.size(); ++i) {
+    const bool site = i % strides[i] == 0;
+    EXPECT_EQ(nref[i].squaredNorm() > 0, site) << i;
+    if (site) {
+      expected += strides[i];
+      ++sites;
+    }
+  }
+  for (const KernelRecord& r : ks.records) weight += r.weight();
+  EXPECT_EQ(ks.records.size(), sites);
+  EXPECT_EQ(weight, expected);  // each kernel stands for its stride's points
+  // The points stood for: about every point (the runs start at multiples of each stride).
+  EXPECT_NEAR(weight, static_cast<double>(f.d.p.size()), 0.01 * static_cast<double>(f.d.p.size()));
+}
+
 }  // namespace
 }  // namespace scanclean::detail

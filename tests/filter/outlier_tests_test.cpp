@@ -157,5 +157,15 @@ TEST(OutlierTestsTest, SparseSupportUsesTheMedianOverKernels) {
   EXPECT_EQ(sparse_support(support, 0), std::vector<std::uint8_t>(support.size(), 0));
 }
 
+TEST(OutlierTestsTest, SparseSupportCountsAKernelAsOftenAsItsStride) {
+  const std::vector<float> support = {10, -1, 2, 9, 11, 4.8f, -1, 12};
+  // Unweighted: median 9, limit 0.5 x 9 = 4.5, and 4.8 passes.
+  EXPECT_EQ(sparse_support(support, 0.5), (std::vector<std::uint8_t>{0, 0, 1, 0, 0, 0, 0, 0}));
+  // The first kernel stands for 4 points: 10 10 10 10 2 9 11 4.8 12, median 10, limit 5.
+  const std::vector<std::uint8_t> strides = {4, 1, 1, 1, 1, 1, 1, 1};
+  EXPECT_EQ(sparse_support(support, 0.5, &strides),
+            (std::vector<std::uint8_t>{0, 0, 1, 0, 0, 1, 0, 0}));
+}
+
 }  // namespace
 }  // namespace scanclean::detail

@@ -56,7 +56,9 @@ struct FilterOptions {
   //! 1, unless the neighbourhoods hold more than K_h points: when kAuto raised h above h0 (for
   //! the noise or by the scale test), floor((h / h0)^2), so that a neighbourhood still holds about
   //! K_h kernels instead of K_h (h / h0)^2; with kAdaptive, floor(k_adaptive / K_h) (2 at
-  //! k_adaptive = 250).
+  //! k_adaptive = 250). Also automatic (not kAdaptive, not in tiled runs): where the points are
+  //! at least twice as dense as at the median point (a range scan near its sensor), the stride
+  //! grows in proportion, floor(density ratio / 2) times, weights likewise (kernel_sites.h).
   int kernel_stride = 0;
   int k_adaptive = 48;            //!< neighbour rank for per-point h_i (kAdaptive), [2, 1000]
   int k_min = 8;                  //!< fewer neighbours within h_i: no kernel, [3, 1000]
