@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "kernel_fit.h"
 #include "noise_scale.h"
@@ -52,7 +53,10 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
     sr.index =
         std::make_unique<NeighborIndex>(pf, r_est * (o.scale == ScaleMode::kAdaptive ? 1.2 : 1.6));
     // Exact distance to the K-th other point: all points within r, grown until K + 1 found.
-    auto kth = [&](const Eigen::Vector3f& q) {
+    // With a `reach`, the search stops before r would pass it (the grid's 27-cell radius; past
+    // it a query takes the k-d tree, built over every point at the first such query) and
+    // returns minus the last radius searched, below the K-th distance.
+    auto kth = [&](const Eigen::Vector3f& q, float reach = 0) {
       thread_local std::vector<float> d2s;
       d2s.reserve(4 * kk);
       float r = static_cast<float>(r_est * 1.15);
@@ -66,12 +70,31 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
           return d2s.empty()
                      ? 0.0
                      : std::sqrt(static_cast<double>(*std::max_element(d2s.begin(), d2s.end())));
+        if (reach > 0 && r * 1.25f > reach) return -static_cast<double>(r);
         r *= 1.25f;
       }
     };
     if (o.scale == ScaleMode::kAuto) {
+      // The median needs only the samples below it exactly. Sparse samples (a range scan's far
+      // surfaces) whose K-th distance lies beyond the grid's reach stop there first; when the
+      // median of the distances so bounded lies below every bound, no such sample can be at or
+      // below it, and it is the exact median. Else they are searched to the end.
       std::vector<double> kd(M, 0.0);
-      parallel_each(M, [&](std::size_t k) { kd[k] = kth(pf[sample[k]]); });
+      const float reach = sr.index->max_adjacent_radius();
+      parallel_each(M, [&](std::size_t k) { kd[k] = kth(pf[sample[k]], reach); });
+      double lowest_bound = std::numeric_limits<double>::infinity();
+      for (const double v : kd)
+        if (v < 0) lowest_bound = std::min(lowest_bound, -v);
+      if (lowest_bound < std::numeric_limits<double>::infinity()) {
+        std::vector<double> bounded = kd;
+        for (double& v : bounded) v = std::abs(v);
+        if (!(median_of(bounded) < lowest_bound))
+          parallel_each(M, [&](std::size_t k) {
+            if (kd[k] < 0) kd[k] = kth(pf[sample[k]]);
+          });
+        else
+          kd = std::move(bounded);
+      }
       double h0 = median_of(kd);
       if (!(h0 > 0)) h0 = fallback_h;  // at least K_h + 1 coincident points
       sr.h0 = h0;

@@ -83,5 +83,25 @@ TEST(ScaleTest, AutomaticH0IsTheMedianKthNeighbourDistance) {
   EXPECT_EQ(s.h, s.h0);  // no noise to raise it
 }
 
+// The median K-th neighbour distance stays exact when part of the samples, far sparser than the
+// rest, stop their search at the grid's reach (scale.cpp): a minority (the median lies among the
+// dense samples) and a majority (the sparse ones must then be searched to the end).
+TEST(ScaleTest, AutomaticH0IsExactWithSparsePartsBeyondTheGridsReach) {
+  for (const auto& [dense, sparse] : {std::pair{3000, 300}, std::pair{600, 3000}}) {
+    PointCloud c = test::noisy_plane(dense, 0.1, 0.0, 65);
+    PointCloud far = test::noisy_plane(sparse, sparse == 300 ? 0.1 : 0.6, 0.0, 66);
+    for (auto& p : far.positions) p.x() += 0.8;
+    append(c, far);
+    Input x = input_of(c);
+    FilterOptions o;
+    o.scale_gamma = 0;
+    const ScaleChoice s = choose_scale(x.in, x.pf, 1.0, false, o);
+    std::vector<double> kd;
+    for (std::size_t i = 0; i < x.pf.size(); ++i) kd.push_back(kth_distance(x.pf, i, o.k_h));
+    std::nth_element(kd.begin(), kd.begin() + (kd.size() - 1) / 2, kd.end());
+    EXPECT_NEAR(s.h0, kd[(kd.size() - 1) / 2], 1e-7) << dense << " + " << sparse;
+  }
+}
+
 }  // namespace
 }  // namespace scanclean::detail
