@@ -42,7 +42,7 @@ struct Projected {
 //! point, the reach of the truncated kernels of a neighbourhood of radius h, are always among
 //! them. A narrow margin keeps the lists short (every iteration evaluates every candidate); a
 //! point that moves farther gathers again.
-constexpr double kRegatherMargin = 1.0 / 16;
+constexpr double kRegatherMargin = 1.0 / 8;
 double candidate_radius(const FilterOptions& o);
 
 //! Projects every point x[i] of d (in place), with kernels ks. `nref` holds each point's own
