@@ -447,7 +447,11 @@ void VsensorStream::run_realtime() {
     bool looped = false;
     {
       std::lock_guard<std::mutex> lock(state_mutex_);
-      looped = loop_ > 0;
+      // The frame after the last one starts the next loop: it is paced by the frame count, as
+      // the loops after it. (Read as "not looped", it got offset 0 when the first timestamp is
+      // 0, as the pattern's, and left together with the last frame: a reader saw an index gap
+      // at every source's first wrap.)
+      looped = loop_ > 0 || position_ >= provider_.frame_count();
       if (position_ < provider_.frame_count()) next_ts = provider_.stamp(position_).device_ts_us;
     }
     if (first_ts < 0) first_ts = next_ts;
