@@ -228,6 +228,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   std::unique_ptr<NeighborIndex> index = std::move(scale.index);
   if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), h * 1.001);
   std::vector<Eigen::Vector3f>().swap(pf);
+  if (o.scale == ScaleMode::kFixed) detail::check_fixed_scale(*index, h);
   // Spatial sort: everything from here on is stored and processed in grid order.
   const std::vector<std::uint32_t> input_index = index->order();
   detail::PointSet d = reorder(in, input_index);

@@ -4,11 +4,14 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <sstream>
+#include <utility>
 
 #include "kernel_fit.h"
 #include "noise_scale.h"
 #include "parallel.h"
 #include "scale_selection.h"
+#include "scanclean/core/errors.h"
 #include "select.h"
 
 namespace scanclean::detail {
@@ -196,6 +199,50 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
   sr.h = h;
   if (o.scale != ScaleMode::kAdaptive) sr.h_min = sr.h_max = h;
   return sr;
+}
+
+void check_fixed_scale(const NeighborIndex& index, double h) {
+  const std::size_t n = index.size(), cells = index.cell_count();
+  if (n <= kMaxMedianNeighbours + 1) return;
+  if (cells > 0 && index.max_adjacent_radius() >= h) {
+    // Every point's neighbours lie in the 27 cells around its cell: if the median point's 27
+    // cells hold few enough, so do its neighbourhoods.
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> block(cells);  // count, points
+    parallel_each(cells, [&](std::size_t c) {
+      std::uint32_t b = 0;
+      index.for_each_adjacent_run(c, [&](std::uint32_t s, std::uint32_t e) { b += e - s; });
+      block[c] = {b, index.cell_begin(c + 1) - index.cell_begin(c)};
+    });
+    std::sort(block.begin(), block.end());
+    std::size_t seen = 0, median = 0;
+    for (const auto& [b, points] : block) {
+      seen += points;
+      if (seen > (n - 1) / 2) {
+        median = b;
+        break;
+      }
+    }
+    if (median <= kMaxMedianNeighbours + 1) return;
+  }
+  // Count exactly at 101 evenly spread points.
+  constexpr std::size_t kSamples = 101;
+  std::vector<std::size_t> count(kSamples, 0);
+  const float r = static_cast<float>(h);
+  parallel_each(kSamples, [&](std::size_t k) {
+    const Eigen::Vector3f& q = index.slot_point(k * (n - 1) / (kSamples - 1));
+    std::size_t c = 0;
+    index.for_each_within(q, r, [&](std::uint32_t, float) { ++c; });
+    count[k] = c > 0 ? c - 1 : 0;  // others
+  });
+  const std::size_t median = median_of(count);
+  if (median > kMaxMedianNeighbours) {
+    std::ostringstream msg;
+    msg << "filter: h = " << h << " m puts a median of " << median
+        << " other points within h of a point (of " << n << "); at most " << kMaxMedianNeighbours
+        << " are supported, as the work grows with their number: give a smaller h (--h), or "
+           "the automatic scale";
+    throw OptionError(msg.str());
+  }
 }
 
 }  // namespace scanclean::detail

@@ -7,6 +7,8 @@
 
 #include <algorithm>
 
+#include "scanclean/core/errors.h"
+#include "scanclean/filter/robust_filter.h"
 #include "support/synthetic.h"
 
 namespace scanclean::detail {
@@ -101,6 +103,32 @@ TEST(ScaleTest, AutomaticH0IsExactWithSparsePartsBeyondTheGridsReach) {
     std::nth_element(kd.begin(), kd.begin() + (kd.size() - 1) / 2, kd.end());
     EXPECT_NEAR(s.h0, kd[(kd.size() - 1) / 2], 1e-7) << dense << " + " << sparse;
   }
+}
+
+// A fixed h that puts most of the cloud within h of a point (a mistyped --h) is refused before
+// the kernels; one whose neighbourhoods hold 50 or 1,250 points is not.
+TEST(ScaleTest, AFixedHHoldingTooManyNeighboursIsRefused) {
+  const PointCloud c = test::noisy_plane(40000, 1.0, 0.0, 67);
+  std::vector<Eigen::Vector3f> pf;
+  for (const auto& p : c.positions) pf.push_back(p.cast<float>());
+  for (const double h : {0.02, 0.1}) {
+    const NeighborIndex index(pf, h * 1.001);
+    EXPECT_NO_THROW(check_fixed_scale(index, h)) << h;
+  }
+  for (const double h : {1.0, 10.0}) {
+    const NeighborIndex index(pf, h * 1.001);
+    try {
+      check_fixed_scale(index, h);
+      ADD_FAILURE() << "h " << h << " was not refused";
+    } catch (const OptionError& e) {
+      EXPECT_NE(std::string(e.what()).find("at most 20000"), std::string::npos) << e.what();
+    }
+  }
+  // Through the filter: refused before any work.
+  FilterOptions o;
+  o.scale = ScaleMode::kFixed;
+  o.h = 10.0;
+  EXPECT_THROW(robust_filter(c, o), OptionError);
 }
 
 }  // namespace
