@@ -35,7 +35,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
 //! The most points a neighbourhood of a given h may hold at the median point. The work of the
 //! kernels and the projection grows with the number of neighbours, and with the whole cloud
 //! within h (a mistyped --h) it grows with the square of the cloud's size: 300,000 points ran
-//! for minutes without an end. The automatic scales hold K_h to about 16 K_h.
+//! for minutes without an end. The automatic scales put from K_h to a few thousand there.
 constexpr std::size_t kMaxMedianNeighbours = 20000;
 //! Throws OptionError, before the kernels, when the median point of `index` (cell at least h)
 //! has more than kMaxMedianNeighbours other points within h. Cheap when it does not: the 27
