@@ -30,7 +30,7 @@ inline bool projected(ProjectionState s) {
 
 //! Per point, in the order of the projected positions.
 struct Projected {
-  std::vector<float> L;                  //!< likelihood at the final position
+  std::vector<float> L;                  //!< likelihood where the last step was taken (StepSums)
   std::vector<std::uint8_t> iterations;  //!< iterations done (at most 255)
   std::vector<ProjectionState> state;
   std::vector<Eigen::Vector3f> normal;  //!< n_bar at the end, oriented like the reference
