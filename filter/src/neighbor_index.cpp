@@ -202,6 +202,35 @@ std::int64_t NeighborIndex::find_cell(std::uint64_t key) const {
   }
 }
 
+std::vector<std::uint32_t> NeighborIndex::adjacent_counts() const {
+  const std::size_t cells = cell_count();
+  std::vector<std::uint32_t> out(cells, 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 1024),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t c = r.begin(); c < r.end(); ++c) {
+                        std::uint32_t b = 0;
+                        for_each_adjacent_run(
+                            c, [&](std::uint32_t s, std::uint32_t e) { b += e - s; });
+                        out[c] = b;
+                      }
+                    });
+  return out;
+}
+
+std::uint32_t NeighborIndex::value_at_point_rank(const std::vector<std::uint32_t>& per_cell,
+                                                 std::size_t rank) const {
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> v(per_cell.size());  // value, points
+  for (std::size_t c = 0; c < v.size(); ++c)
+    v[c] = {per_cell[c], cell_begin_[c + 1] - cell_begin_[c]};
+  std::sort(v.begin(), v.end());
+  std::size_t seen = 0;
+  for (const auto& [value, points] : v) {
+    seen += points;
+    if (seen > rank) return value;
+  }
+  return v.empty() ? 0 : v.back().first;
+}
+
 const NeighborIndex::Tree& NeighborIndex::tree() const {
   std::call_once(tree_once_, [this] { tree_ = std::make_unique<Tree>(&pts_); });
   return *tree_;

@@ -72,6 +72,14 @@ class NeighborIndex {
       f(cell_begin_[adj_[k]], cell_begin_[adj_[k] + 1]);
   }
   float max_adjacent_radius() const { return cell_f_; }
+  //! Per occupied cell, the points in its 27 adjacent cells (for_each_adjacent_run): an upper
+  //! bound of the points within max_adjacent_radius() of any point of the cell. Parallel.
+  std::vector<std::uint32_t> adjacent_counts() const;
+  //! With every point taking its cell's value per_cell[c]: the value at 0-based rank `rank`
+  //! (< size()) of those values in ascending order, e.g. the median over the points of
+  //! adjacent_counts(), without an array per point.
+  std::uint32_t value_at_point_rank(const std::vector<std::uint32_t>& per_cell,
+                                    std::size_t rank) const;
 
   //! The k nearest points to q (including a point equal to q), as (squared distance, index),
   //! sorted by distance then index. Fewer if the set has fewer points. Thread-safe (const).

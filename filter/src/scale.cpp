@@ -207,21 +207,7 @@ void check_fixed_scale(const NeighborIndex& index, double h) {
   if (cells > 0 && index.max_adjacent_radius() >= h) {
     // Every point's neighbours lie in the 27 cells around its cell: if the median point's 27
     // cells hold few enough, so do its neighbourhoods.
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> block(cells);  // count, points
-    parallel_each(cells, [&](std::size_t c) {
-      std::uint32_t b = 0;
-      index.for_each_adjacent_run(c, [&](std::uint32_t s, std::uint32_t e) { b += e - s; });
-      block[c] = {b, index.cell_begin(c + 1) - index.cell_begin(c)};
-    });
-    std::sort(block.begin(), block.end());
-    std::size_t seen = 0, median = 0;
-    for (const auto& [b, points] : block) {
-      seen += points;
-      if (seen > (n - 1) / 2) {
-        median = b;
-        break;
-      }
-    }
+    const std::size_t median = index.value_at_point_rank(index.adjacent_counts(), (n - 1) / 2);
     if (median <= kMaxMedianNeighbours + 1) return;
   }
   // Count exactly at 101 evenly spread points.

@@ -90,5 +90,31 @@ TEST(NeighborIndexTest, EmptyAndTinySets) {
   EXPECT_EQ(calls, 0);
 }
 
+// The per-point rank of per-cell values against the sorted array of every point's value (the
+// oracle), and the adjacent counts against the distance bound they promise.
+TEST(NeighborIndexTest, AdjacentCountsAndTheirRanksOverThePoints) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Eigen::Vector3f> p;
+  for (int k = 0; k < 4000; ++k) p.emplace_back(u(rng), u(rng) * u(rng), 0.1f * u(rng));
+  const NeighborIndex index(p, 0.05);
+  const std::vector<std::uint32_t> counts = index.adjacent_counts();
+  ASSERT_EQ(counts.size(), index.cell_count());
+  std::vector<std::uint32_t> per_point;
+  for (std::size_t c = 0; c < counts.size(); ++c) {
+    for (std::uint32_t s = index.cell_begin(c); s < index.cell_begin(c + 1); ++s) {
+      per_point.push_back(counts[c]);
+      std::uint32_t within = 0;
+      index.for_each_slot_within(index.slot_point(s), index.max_adjacent_radius(),
+                                 [&](std::uint32_t, float) { ++within; });
+      EXPECT_LE(within, counts[c]) << "slot " << s;
+    }
+  }
+  std::sort(per_point.begin(), per_point.end());
+  for (const std::size_t rank : {std::size_t{0}, per_point.size() / 4, (per_point.size() - 1) / 2,
+                                 per_point.size() / 2, per_point.size() - 1})
+    EXPECT_EQ(index.value_at_point_rank(counts, rank), per_point[rank]) << "rank " << rank;
+}
+
 }  // namespace
 }  // namespace scanclean
