@@ -51,10 +51,21 @@ FitSums fit_sums_scalar(const FitSample* samples, std::size_t n);
 bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
                  int k_min, double eigen_floor, KernelFit& out);
 
+//! The normal of a fitted kernel: the sensor normal vi when `use_dir` (an oriented fit at a point
+//! with a sensor normal), the PCA normal (e.col(0)) otherwise; with `orients_only` the PCA
+//! normal, turned to agree with vi when `use_dir`.
+inline Eigen::Vector3f kernel_normal(const KernelFit& fit, bool use_dir, bool orients_only,
+                                     const Eigen::Vector3f& vi) {
+  if (use_dir && !orients_only) return vi;
+  const Eigen::Vector3f n = fit.e.col(0).cast<float>().normalized();
+  return use_dir && n.dot(vi) < 0 ? Eigen::Vector3f(-n) : n;
+}
+
 //! The robust weighted PCA of the neighbours of point i of d within h. `visit(g)` must call g(j)
 //! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
 //! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
-//! normal is the sensor normal; otherwise it is the PCA normal. Returns false if fewer than
+//! normal is the sensor normal (d.v_orients_only: the PCA normal turned to agree with it);
+//! otherwise it is the PCA normal. Returns false if fewer than
 //! k_min neighbours remain. `untrimmed` (optional) receives the neighbours as gathered, before
 //! trimming (for the own-plane refit, plane_refit.h).
 template <class Visit>
@@ -80,7 +91,7 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
   });
   if (untrimmed) *untrimmed = nb;
   if (!fit_samples(nb, pi, h, k_min, eigen_floor, out)) return false;
-  out.n = use_dir ? vi : out.e.col(0).cast<float>().normalized();
+  out.n = kernel_normal(out, use_dir, d.v_orients_only, vi);
   return true;
 }
 

@@ -74,7 +74,9 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
       fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, again, &gathered);
       if (refit_own_plane(gathered, d.p[i], h, refit, fit)) {
         refitted[candidate(i)] = 1;
-        if (!(prm.oriented && d.has_v(i))) fit.n = fit.e.col(0).cast<float>().normalized();
+        const bool use_dir = prm.oriented && d.has_v(i);
+        fit.n = kernel_normal(fit, use_dir, d.v_orients_only,
+                              use_dir ? d.v[i] : Eigen::Vector3f::Zero());
       }
     }
     nref[i] = fit.n;

@@ -96,6 +96,7 @@ detail::PointSet reorder(detail::PointSet& in, const std::vector<std::uint32_t>&
   const std::size_t N = order.size();
   detail::PointSet d;
   d.h = in.h;
+  d.v_orients_only = in.v_orients_only;
   auto move_into = [&](auto& from, auto& to) {
     if (from.empty()) return;
     to.resize(N);
@@ -133,6 +134,7 @@ void second_pass(const detail::PointSet& d, const detail::KernelParams& prm, con
     if (detail::projected(pr.state[i])) sub.push_back(static_cast<std::uint32_t>(i));
   detail::PointSet d2;
   d2.h = d.h;
+  d2.v_orients_only = d.v_orients_only;
   d2.p.resize(sub.size());
   std::vector<Eigen::Vector3f> pf2(sub.size());
   for (std::size_t k = 0; k < sub.size(); ++k) {
@@ -211,6 +213,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   std::vector<Eigen::Vector3f> pf(N);
   parallel_each(N, [&](std::size_t i) { pf[i] = (input.positions[i] - origin).cast<float>(); });
   detail::PointSet in = input_points(input, origin, use_v, use_w);
+  in.v_orients_only = o.normals_orient_only;
   detail::ScaleChoice scale = detail::choose_scale(in, pf, box.diagonal().norm(), use_v, o);
   const double h = scale.h;
   st.h = h;

@@ -707,6 +707,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         }
       });
       detail::PointSet g;
+      g.v_orients_only = o.normals_orient_only;
       for (const std::string& m : allgather(comm, mine.s)) {
         Reader r{m};
         while (!r.done()) {

@@ -53,6 +53,7 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["remove_small_components"] = o.remove_small_components;
   d["min_component_size"] = o.min_component_size;
   d["use_sensor_normals"] = o.use_sensor_normals;
+  d["normals_orient_only"] = o.normals_orient_only;
   d["use_confidences"] = o.use_confidences;
   d["threads"] = o.threads;
   return d;
@@ -142,6 +143,8 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.min_component_size = as<std::size_t>(v, k);
     else if (k == "use_sensor_normals")
       o.use_sensor_normals = as<bool>(v, k);
+    else if (k == "normals_orient_only")
+      o.normals_orient_only = as<bool>(v, k);
     else if (k == "use_confidences")
       o.use_confidences = as<bool>(v, k);
     else if (k == "threads")

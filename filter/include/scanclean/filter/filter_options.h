@@ -117,8 +117,15 @@ struct FilterOptions {
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
   bool use_sensor_normals = true;        //!< input normals (non-zero ones) replace PCA normals
-  bool use_confidences = true;           //!< input confidences are the kernel weights w_i
-  int threads = 0;  //!< 0 = all cores, else [1, 1024]; output identical for any
+  //! With use_sensor_normals: the input normals only orient. They still select a kernel's
+  //! neighbours (those whose normals agree, dot > 0.5: the two sides of a thin part stay apart)
+  //! and orient its normal, but the normal is the weighted PCA normal of those neighbours, not
+  //! the input normal. For estimated normals (`scanclean filter --orient-normals`: jet-fitted
+  //! and MST-oriented over k neighbours, noisier than the PCA at h); false (default) for sensor
+  //! normals, which are measured per point.
+  bool normals_orient_only = false;
+  bool use_confidences = true;  //!< input confidences are the kernel weights w_i
+  int threads = 0;              //!< 0 = all cores, else [1, 1024]; output identical for any
   //! Optional progress report (phase name, fraction in [0, 1]); always called from the thread
   //! that called robust_filter().
   std::function<void(const std::string& phase, double fraction)> progress;
