@@ -1,5 +1,6 @@
 #include "scanclean/mesh_handoff.h"
 
+#include <chrono>
 #include <cstdio>
 #include <vector>
 
@@ -28,6 +29,32 @@ std::shared_ptr<MeshHandoff> add_mesh_option(CLI::App& cmd) {
       ->check(CLI::IsMember({"afront", "poisson"}))
       ->capture_default_str();
   return m;
+}
+
+bool mesh_available() {
+#if defined(SCANCLEAN_HAVE_MESH)
+  return true;
+#else
+  return false;
+#endif
+}
+
+OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k) {
+#if defined(SCANCLEAN_HAVE_MESH)
+  if (k < 1 || cloud.size() <= static_cast<std::size_t>(k))
+    throw InputError("normal estimation over " + std::to_string(k) +
+                     " neighbours needs more than " + std::to_string(k) +
+                     " points; the cloud has " + std::to_string(cloud.size()));
+  const auto t0 = std::chrono::steady_clock::now();
+  OrientedNormals out;
+  out.normals = estimate_normals(cloud, k);
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return out;
+#else
+  (void)cloud;
+  (void)k;
+  throw UnavailableError("normal estimation needs the mesh module (CGAL), which this build lacks");
+#endif
 }
 
 void check_mesh_output(const MeshHandoff& m, const std::string& command) {

@@ -4,6 +4,7 @@
 //! progress, the summary lines. Builds without the mesh module too: then --mesh exits 5.
 
 #include <CLI/CLI.hpp>
+#include <Eigen/Core>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -24,6 +25,18 @@ struct MeshHandoff {
   std::string method = "afront";  //!< --mesh-method
   bool wanted() const { return !path.empty(); }
 };
+
+//! Whether this build has the mesh module (CGAL).
+bool mesh_available();
+
+//! Normals estimated for a cloud without them (mesh module's estimate_normals: CGAL jet fit over
+//! k neighbours, oriented by CGAL's MST over k neighbours), and the seconds it took.
+struct OrientedNormals {
+  std::vector<Eigen::Vector3f> normals;
+  double seconds = 0;
+};
+//! \throw UnavailableError without the mesh module; InputError for fewer than k + 1 points.
+OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k);
 
 //! Adds --mesh FILE and --mesh-method to `cmd`.
 std::shared_ptr<MeshHandoff> add_mesh_option(CLI::App& cmd);

@@ -247,6 +247,51 @@ TEST(ScancleanCliTest, DisplacementOptionReachesTheFilter) {
   EXPECT_EQ(run_filter({"--displacement-sigma", "-1"}).exit_code, 2);
 }
 
+TEST(ScancleanCliTest, OrientNormalsGivesACloudWithoutNormalsConsistentOnes) {
+  // A noisy sphere without normals: the filter's output normals are PCA normals of either sign;
+  // with --orient-normals they follow the estimated, MST-oriented normals, so (nearly) all face
+  // the same way, and the points are as close to the sphere as without.
+  const auto dir = test::make_temp_dir("cli");
+  constexpr double kRadius = 0.3;
+  PointCloud cloud = test::noisy_sphere(6000, kRadius, 0.002, 34);  // seed 34
+  cloud.normals.clear();
+  write_point_cloud(dir / "in.ply", cloud);
+  auto outward_share = [](const PointCloud& c) {
+    std::size_t out = 0;
+    for (std::size_t i = 0; i < c.size(); ++i)
+      out += c.normals[i].dot(c.positions[i].cast<float>()) > 0 ? 1 : 0;
+    return static_cast<double>(out) / static_cast<double>(std::max<std::size_t>(1, c.size()));
+  };
+  auto rms_radius = [&](const PointCloud& c) {
+    double s = 0;
+    for (const auto& p : c.positions) s += (p.norm() - kRadius) * (p.norm() - kRadius);
+    return std::sqrt(s / static_cast<double>(std::max<std::size_t>(1, c.size())));
+  };
+  const ProgramRun plain = run_filter_in(dir, {});
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  const PointCloud p = read_point_cloud(dir / "out.ply");
+  ASSERT_TRUE(p.has_normals());
+  const double plain_share = outward_share(p);
+  EXPECT_GT(std::min(plain_share, 1 - plain_share), 0.1) << plain_share;  // both signs occur
+  const ProgramRun oriented = run_filter_in(dir, {"--orient-normals", "24"});
+  ASSERT_EQ(oriented.exit_code, 0) << oriented.err;
+  EXPECT_TRUE(contains(oriented.out, "normals:") &&
+              contains(oriented.out, "estimated (jet fit and MST over 24 neighbours)"))
+      << oriented.out;
+  const PointCloud o = read_point_cloud(dir / "out.ply");
+  ASSERT_TRUE(o.has_normals());
+  const double share = outward_share(o);
+  EXPECT_GT(std::max(share, 1 - share), 0.999) << share;
+  EXPECT_LT(rms_radius(o), 1.1 * rms_radius(p));
+  // Out of range: exit 2 naming the option, before any work (nothing written).
+  fs::remove(dir / "out.ply");
+  const ProgramRun bad = run_filter_in(dir, {"--orient-normals", "3"});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_TRUE(contains(bad.err, "--orient-normals")) << bad.err;
+  EXPECT_FALSE(fs::exists(dir / "out.ply"));
+  EXPECT_EQ(run_filter_in(dir, {"--orient-normals", "24", "--no-sensor-normals"}).exit_code, 2);
+}
+
 TEST(ScancleanCliTest, UnwritableOutputExitsFourAndLeavesNoFile) {
   const auto dir = test::make_temp_dir("cli");
   write_point_cloud(dir / "in.ply", test::noisy_plane(300, 1.0, 0.001, 5));
