@@ -8,6 +8,9 @@
 #ifdef SCANCLEAN_BENCH_HAVE_FILTER
 #include "scanclean/filter/robust_filter.h"
 #endif
+#ifdef SCANCLEAN_BENCH_HAVE_MESH_SUITE
+#include "scanclean/mesh/surface_reconstruction.h"
+#endif
 
 namespace scanclean::bench {
 
@@ -17,6 +20,7 @@ std::string FilterSettings::describe() const {
   if (adaptive) s << ", scale=adaptive k=" << k_adaptive;
   if (kernel_stride > 0) s << ", kernel_stride=" << kernel_stride;
   if (refit_spread >= 0) s << ", refit_spread=" << refit_spread;
+  if (orient_k > 0) s << ", normals oriented over k=" << orient_k;
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
 }
@@ -45,7 +49,19 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   options.threads = settings.threads;
   if (settings.refit_spread >= 0) options.refit_spread = settings.refit_spread;
   const auto t0 = std::chrono::steady_clock::now();
-  FilterResult r = robust_filter(input, options);
+  FilterResult r;
+  if (settings.orient_k > 0 && !input.has_normals()) {
+#ifdef SCANCLEAN_BENCH_HAVE_MESH_SUITE
+    PointCloud oriented = input;
+    oriented.normals = estimate_normals(oriented, settings.orient_k);
+    options.normals_orient_only = true;
+    r = robust_filter(oriented, options);
+#else
+    throw UnavailableError("--orient-normals needs the mesh module (CGAL) in this build");
+#endif
+  } else {
+    r = robust_filter(input, options);
+  }
   const auto t1 = std::chrono::steady_clock::now();
   FilterRun run;
   run.seconds_wall = std::chrono::duration<double>(t1 - t0).count();

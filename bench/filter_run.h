@@ -20,6 +20,10 @@ struct FilterSettings {
   int kernel_stride = 0;     //!< FilterOptions::kernel_stride (0 = automatic)
   int threads = 0;           //!< FilterOptions::threads (0 = all cores)
   double refit_spread = -1;  //!< FilterOptions::refit_spread (< 0: the library's default)
+  //! > 0: a cloud without normals gets normals estimated and oriented over this many neighbours
+  //! first (as `scanclean filter --orient-normals`), used with FilterOptions::normals_orient_only;
+  //! their time is part of seconds_wall.
+  int orient_k = 0;
   std::string describe() const;
 };
 

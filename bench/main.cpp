@@ -120,6 +120,11 @@ int run(int argc, char** argv) {
   double refit_spread = -1;
   app.add_option("--refit-spread", refit_spread,
                  "quality and real suites: robust_filter's refit_spread (default: the library's)");
+  int orient_normals = 0;
+  app.add_option("--orient-normals", orient_normals,
+                 "quality and real suites: estimate and orient normals over K neighbours (CGAL "
+                 "jet + MST) before robust_filter, as scanclean filter --orient-normals K")
+      ->check(CLI::Range(0, 200));
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
@@ -147,6 +152,7 @@ int run(int argc, char** argv) {
   ctx.filter_only = filter_only;
   ctx.shape_names = shape_names;
   ctx.refit_spread = refit_spread;
+  ctx.orient_normals = orient_normals;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

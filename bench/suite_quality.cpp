@@ -27,12 +27,13 @@ struct Method {
 };
 
 std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool with_wlop,
-                                      double refit_spread) {
+                                      const Context& ctx) {
   std::vector<Method> m;
   if (filter_available()) {
     FilterSettings fs;
     fs.threads = threads;
-    fs.refit_spread = refit_spread;
+    fs.refit_spread = ctx.refit_spread;
+    fs.orient_k = ctx.orient_normals;
     m.push_back({"scanclean robust_filter", fs.describe(),
                  [fs](const Points& in) { return run_robust_filter(in, fs).cloud.positions; }});
   }
@@ -139,7 +140,7 @@ void run_shape_set(Context& ctx, std::vector<std::unique_ptr<Shape>> all, bool l
       const double sigma = sigmas[si];
       const PeerSettings ps = peer_settings(sigma, n);
       const bool with_wlop = !ctx.quick && (ctx.wlop_max_n == 0 || n <= ctx.wlop_max_n);
-      auto methods = smoothing_methods(ps, ctx.threads, with_wlop, ctx.refit_spread);
+      auto methods = smoothing_methods(ps, ctx.threads, with_wlop, ctx);
       if (ctx.filter_only)
         methods.erase(
             std::remove_if(methods.begin(), methods.end(),

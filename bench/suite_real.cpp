@@ -70,6 +70,7 @@ void run_real_suite(Context& ctx) {
   fs.merge = true;
   fs.threads = ctx.threads;
   fs.refit_spread = ctx.refit_spread;
+  fs.orient_k = ctx.orient_normals;
   FilterRun run = run_robust_filter(merged, fs);
   const DistanceStats before = distance_stats(md, merged.positions);
   const DistanceStats after = distance_stats(md, run.cloud.positions);

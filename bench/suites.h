@@ -28,6 +28,9 @@ struct Context {
   std::vector<std::string> shape_names;
   //! quality and real suites: FilterOptions::refit_spread (< 0: the library's default)
   double refit_spread = -1;
+  //! quality and real suites: > 0 estimates and orients normals over this many neighbours
+  //! before robust_filter (FilterSettings::orient_k)
+  int orient_normals = 0;
   //! mesh suite: write its PNG pictures into this folder (empty: none)
   std::filesystem::path pictures_dir;
   std::vector<Table> tables;
