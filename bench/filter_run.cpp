@@ -53,7 +53,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   if (settings.orient_k > 0 && !input.has_normals()) {
 #ifdef SCANCLEAN_BENCH_HAVE_MESH_SUITE
     PointCloud oriented = input;
-    oriented.normals = estimate_normals(oriented, settings.orient_k);
+    oriented.normals = estimate_orienting_normals(oriented, settings.orient_k);
     options.normals_orient_only = true;
     r = robust_filter(oriented, options);
 #else

@@ -41,13 +41,9 @@ bool mesh_available() {
 
 OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k) {
 #if defined(SCANCLEAN_HAVE_MESH)
-  if (k < 1 || cloud.size() <= static_cast<std::size_t>(k))
-    throw InputError("normal estimation over " + std::to_string(k) +
-                     " neighbours needs more than " + std::to_string(k) +
-                     " points; the cloud has " + std::to_string(cloud.size()));
   const auto t0 = std::chrono::steady_clock::now();
   OrientedNormals out;
-  out.normals = estimate_normals(cloud, k);
+  out.normals = estimate_orienting_normals(cloud, k);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 #else

@@ -29,8 +29,8 @@ struct MeshHandoff {
 //! Whether this build has the mesh module (CGAL).
 bool mesh_available();
 
-//! Normals estimated for a cloud without them (mesh module's estimate_normals: CGAL jet fit over
-//! k neighbours, oriented by CGAL's MST over k neighbours), and the seconds it took.
+//! Normals estimated for a cloud without them (the mesh module's estimate_orienting_normals: CGAL
+//! jet fit over k neighbours, oriented by CGAL's MST over k / 2), and the seconds it took.
 struct OrientedNormals {
   std::vector<Eigen::Vector3f> normals;
   double seconds = 0;

@@ -1,5 +1,6 @@
 #include "scanclean/mesh/surface_reconstruction.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -75,11 +76,19 @@ double average_spacing(const PointCloud& cloud, int k) {
   return mesh_detail::average_spacing(cloud.positions, k);
 }
 
-std::vector<Eigen::Vector3f> estimate_normals(const PointCloud& cloud, int k) {
+std::vector<Eigen::Vector3f> estimate_normals(const PointCloud& cloud, int k, int mst_k) {
   check_cloud(cloud);
   std::vector<Eigen::Vector3f> n = mesh_detail::jet_normals(cloud.positions, k);
-  mesh_detail::mst_orient(cloud.positions, n, k);
+  mesh_detail::mst_orient(cloud.positions, n, mst_k > 0 ? mst_k : k);
   return n;
+}
+
+std::vector<Eigen::Vector3f> estimate_orienting_normals(const PointCloud& cloud, int k) {
+  if (k < 1 || cloud.size() <= static_cast<std::size_t>(k))
+    throw InputError("normal estimation over " + std::to_string(k) +
+                     " neighbours needs more than " + std::to_string(k) +
+                     " points; the cloud has " + std::to_string(cloud.size()));
+  return estimate_normals(cloud, k, std::max(6, k / 2));
 }
 
 MeshResult reconstruct_surface(const PointCloud& cloud, const MeshOptions& o) {

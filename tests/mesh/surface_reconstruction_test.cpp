@@ -161,6 +161,23 @@ TEST(SurfaceReconstructionTest, EstimatedNormalsPointOutwardOnASphere) {
   EXPECT_EQ(outward, sphere.size());
 }
 
+TEST(SurfaceReconstructionTest, OrientingNormalsFaceOneWayAndNeedMoreThanKPoints) {
+  // The filter's --orient-normals normals (jet over k, MST over k / 2) on a noisy sphere: every
+  // one within 25 degrees of the outward normal (the MST turns the top point's up); and no
+  // estimate from k points or fewer.
+  PointCloud sphere = test::noisy_sphere(3000, 1.0, 0.01, 18);  // seed 18
+  sphere.normals.clear();
+  const auto normals = estimate_orienting_normals(sphere, 48);
+  ASSERT_EQ(normals.size(), sphere.size());
+  std::size_t outward = 0;
+  for (std::size_t i = 0; i < sphere.size(); ++i)
+    if (normals[i].cast<double>().dot(sphere.positions[i].normalized()) > 0.9) ++outward;
+  EXPECT_EQ(outward, sphere.size());
+  PointCloud few;
+  few.positions.assign(sphere.positions.begin(), sphere.positions.begin() + 48);
+  EXPECT_THROW(estimate_orienting_normals(few, 48), InputError);
+}
+
 TEST(SurfaceReconstructionTest, ErrorsNameWhatIsMissing) {
   PointCloud sphere = test::noisy_sphere(500, 1.0, 0.0, 19);
   MeshOptions poisson;
