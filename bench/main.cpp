@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -122,9 +123,17 @@ int run(int argc, char** argv) {
                  "quality and real suites: robust_filter's refit_spread (default: the library's)");
   int orient_normals = 0;
   app.add_option("--orient-normals", orient_normals,
-                 "quality and real suites: estimate and orient normals over K neighbours (CGAL "
-                 "jet + MST) before robust_filter, as scanclean filter --orient-normals K")
-      ->check(CLI::Range(0, 200));
+                 "quality and real suites: estimate normals over K neighbours (CGAL jet fit) and "
+                 "orient them (CGAL MST over K / 2) before robust_filter, as scanclean filter "
+                 "--orient-normals K; 0 (off) or K in [6, 200]")
+      ->check(CLI::Validator(
+          [](std::string& s) {
+            char* end = nullptr;
+            const long k = std::strtol(s.c_str(), &end, 10);
+            const bool ok = end != s.c_str() && *end == '\0' && (k == 0 || (k >= 6 && k <= 200));
+            return ok ? std::string() : "expected 0 (off) or an integer in [6, 200], got " + s;
+          },
+          "0 or K in [6, 200]"));
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");

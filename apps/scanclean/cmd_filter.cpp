@@ -46,7 +46,7 @@ struct FilterCommandOptions {
   int orient_normals = 0;                // --orient-normals K: 0 = off
 };
 
-// --orient-normals K: the range CLI11 checks, stated once.
+// --orient-normals K: the range run_filter checks before any work (0 = off).
 constexpr int kOrientMinK = 6, kOrientMaxK = 200;
 
 void print_warnings(const std::string& file, const ReadReport& report) {
