@@ -123,7 +123,7 @@ int run(int argc, char** argv) {
                  "quality and real suites: robust_filter's refit_spread (default: the library's)");
   int orient_normals = 0;
   app.add_option("--orient-normals", orient_normals,
-                 "quality and real suites: estimate normals over K neighbours (CGAL jet fit) and "
+                 "quality and real suites: estimate normals over K neighbours (CGAL PCA) and "
                  "orient them (CGAL MST over K / 2) before robust_filter, as scanclean filter "
                  "--orient-normals K; 0 (off) or K in [6, 200]")
       ->check(CLI::Validator(

@@ -242,8 +242,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
       cloud.normals = on.normals;
       o.normals_orient_only = true;
       char text[160];
-      std::snprintf(text, sizeof text,
-                    "estimated (jet fit over %d neighbours, MST over %d) in %.2f s",
+      std::snprintf(text, sizeof text, "estimated (PCA over %d neighbours, MST over %d) in %.2f s",
                     c.orient_normals, std::max(6, c.orient_normals / 2), on.seconds);
       orientation = text;
     }
@@ -369,11 +368,11 @@ const CommandRegistrar kRegistrar{{
       cmd.add_option("--halo", c->halo,
                      "Tiled run: the halo around each tile, in units of h (default 4)");
       cmd.add_option("--orient-normals", c->orient_normals,
-                     "For a cloud without normals: estimate normals over K neighbours (CGAL jet "
-                     "fit) and orient them consistently (CGAL MST over K / 2) before filtering; "
-                     "they keep the two sides of thin parts apart (kernels only gather "
-                     "neighbours facing their way). 96 suits the benchmark's shapes and costs "
-                     "about 30 s and 4.5 GB per million points. In [6, 200]; default 0 = off");
+                     "For a cloud without normals: estimate normals over K neighbours (CGAL PCA) "
+                     "and orient them consistently (CGAL MST over K / 2) before filtering; they "
+                     "keep the two sides of thin parts apart (kernels only gather neighbours "
+                     "facing their way). 96 suits the benchmark's shapes and costs about 17 s and "
+                     "4.5 GB per million points. In [6, 200]; default 0 = off");
       auto values = add_filter_options(cmd);
       return [c, values] { return run_filter(*c, *values); };
     },

@@ -30,7 +30,7 @@ struct MeshHandoff {
 bool mesh_available();
 
 //! Normals estimated for a cloud without them (the mesh module's estimate_orienting_normals: CGAL
-//! jet fit over k neighbours, oriented by CGAL's MST over k / 2), and the seconds it took.
+//! PCA normals over k neighbours, oriented by CGAL's MST over k / 2), and the seconds it took.
 struct OrientedNormals {
   std::vector<Eigen::Vector3f> normals;
   double seconds = 0;

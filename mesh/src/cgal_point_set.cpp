@@ -1,9 +1,10 @@
-// CGAL point-set processing for meshing: average spacing, jet normals, MST orientation; and the
-// normal-agreement check (nanoflann).
+// CGAL point-set processing for meshing: average spacing, jet and PCA normals, MST
+// orientation; and the normal-agreement check (nanoflann).
 #include <CGAL/Simple_cartesian.h>
 #include <CGAL/compute_average_spacing.h>
 #include <CGAL/jet_estimate_normals.h>
 #include <CGAL/mst_orient_normals.h>
+#include <CGAL/pca_estimate_normals.h>
 #include <CGAL/property_map.h>
 #include <CGAL/tags.h>
 
@@ -46,21 +47,38 @@ double average_spacing(const std::vector<Eigen::Vector3d>& points, int k) {
   return CGAL::compute_average_spacing<Concurrency>(pts, static_cast<unsigned>(k));
 }
 
-std::vector<Eigen::Vector3f> jet_normals(const std::vector<Eigen::Vector3d>& points, int k) {
+namespace {
+
+// CGAL's jet or PCA normal estimation over k neighbours (unoriented), as floats.
+template <bool kJet>
+std::vector<Eigen::Vector3f> cgal_normals(const std::vector<Eigen::Vector3d>& points, int k) {
   using PointWithNormal = std::pair<Point, Vector>;
   std::vector<PointWithNormal> pwn;
   pwn.reserve(points.size());
   for (const auto& p : points) pwn.emplace_back(Point(p.x(), p.y(), p.z()), Vector(0, 0, 0));
-  CGAL::jet_estimate_normals<Concurrency>(
-      pwn, static_cast<unsigned>(k),
+  const auto params =
       CGAL::parameters::point_map(CGAL::First_of_pair_property_map<PointWithNormal>())
-          .normal_map(CGAL::Second_of_pair_property_map<PointWithNormal>()));
+          .normal_map(CGAL::Second_of_pair_property_map<PointWithNormal>());
+  if constexpr (kJet)
+    CGAL::jet_estimate_normals<Concurrency>(pwn, static_cast<unsigned>(k), params);
+  else
+    CGAL::pca_estimate_normals<Concurrency>(pwn, static_cast<unsigned>(k), params);
   std::vector<Eigen::Vector3f> out;
   out.reserve(pwn.size());
   for (const auto& [p, n] : pwn)
     out.emplace_back(static_cast<float>(n.x()), static_cast<float>(n.y()),
                      static_cast<float>(n.z()));
   return out;
+}
+
+}  // namespace
+
+std::vector<Eigen::Vector3f> jet_normals(const std::vector<Eigen::Vector3d>& points, int k) {
+  return cgal_normals<true>(points, k);
+}
+
+std::vector<Eigen::Vector3f> pca_normals(const std::vector<Eigen::Vector3d>& points, int k) {
+  return cgal_normals<false>(points, k);
 }
 
 std::size_t mst_orient(const std::vector<Eigen::Vector3d>& points,

@@ -27,6 +27,9 @@ double average_spacing(const std::vector<Eigen::Vector3d>& points, int k);
 //! CGAL::jet_estimate_normals (parallel), unoriented.
 std::vector<Eigen::Vector3f> jet_normals(const std::vector<Eigen::Vector3d>& points, int k);
 
+//! CGAL::pca_estimate_normals (parallel), unoriented.
+std::vector<Eigen::Vector3f> pca_normals(const std::vector<Eigen::Vector3d>& points, int k);
+
 //! CGAL::mst_orient_normals in place; returns how many normals were flipped. Points it could
 //! not reach keep their normal.
 std::size_t mst_orient(const std::vector<Eigen::Vector3d>& points,

@@ -88,7 +88,10 @@ std::vector<Eigen::Vector3f> estimate_orienting_normals(const PointCloud& cloud,
     throw InputError("normal estimation over " + std::to_string(k) +
                      " neighbours needs more than " + std::to_string(k) +
                      " points; the cloud has " + std::to_string(cloud.size()));
-  return estimate_normals(cloud, k, std::max(6, k / 2));
+  check_cloud(cloud);
+  std::vector<Eigen::Vector3f> n = mesh_detail::pca_normals(cloud.positions, k);
+  mesh_detail::mst_orient(cloud.positions, n, std::max(6, k / 2));
+  return n;
 }
 
 MeshResult reconstruct_surface(const PointCloud& cloud, const MeshOptions& o) {

@@ -276,7 +276,7 @@ TEST(ScancleanCliTest, OrientNormalsGivesACloudWithoutNormalsConsistentOnes) {
   const ProgramRun oriented = run_filter_in(dir, {"--orient-normals", "24"});
   ASSERT_EQ(oriented.exit_code, 0) << oriented.err;
   EXPECT_TRUE(contains(oriented.out, "normals:") &&
-              contains(oriented.out, "estimated (jet fit over 24 neighbours, MST over 12)"))
+              contains(oriented.out, "estimated (PCA over 24 neighbours, MST over 12)"))
       << oriented.out;
   const PointCloud o = read_point_cloud(dir / "out.ply");
   ASSERT_TRUE(o.has_normals());

@@ -120,8 +120,8 @@ struct FilterOptions {
   //! With use_sensor_normals: the input normals only orient. They still select a kernel's
   //! neighbours (those whose normals agree, dot > 0.5: the two sides of a thin part stay apart)
   //! and orient its normal, but the normal is the weighted PCA normal of those neighbours, not
-  //! the input normal. For estimated normals (`scanclean filter --orient-normals K`: a jet fit
-  //! over K neighbours, oriented by an MST over K / 2; noisier than the PCA at h); false
+  //! the input normal. For estimated normals (`scanclean filter --orient-normals K`: PCA over
+  //! K neighbours, oriented by an MST over K / 2; noisier than the fit at h); false
   //! (default) for sensor normals, which are measured per point.
   bool normals_orient_only = false;
   bool use_confidences = true;  //!< input confidences are the kernel weights w_i

@@ -103,11 +103,12 @@ double average_spacing(const PointCloud& cloud, int k = 6);
 std::vector<Eigen::Vector3f> estimate_normals(const PointCloud& cloud, int k = 18, int mst_k = 0);
 
 //! The normals `scanclean filter --orient-normals k` gives a cloud without them, for the filter's
-//! FilterOptions::normals_orient_only: estimate_normals with the jet fit over k neighbours and
-//! the MST over max(6, k / 2). The MST's graph holds most of the memory (on the 290k merged
-//! bunny scans, k = 96: 2.6 GB peak with the MST over 96, 1.4 GB over 48), and over half of k
-//! it oriented the benchmark's shapes as well (bench/README.md, "Defaults"). \throw InputError
-//! for fewer than k + 1 points (or kMinMeshPoints).
+//! FilterOptions::normals_orient_only: CGAL's PCA normals over k neighbours (the filter only
+//! takes their orientation; a jet fit cost 1.7x as much for the same benchmark figures within
+//! 3 %), oriented by CGAL::mst_orient_normals over max(6, k / 2). The MST's graph holds most of
+//! the memory (on the 290k merged bunny scans, k = 96: 2.6 GB peak with the MST over 96, 1.4 GB
+//! over 48), and over half of k it oriented the benchmark's shapes as well (bench/README.md,
+//! "Defaults"). \throw InputError for fewer than k + 1 points (or kMinMeshPoints).
 std::vector<Eigen::Vector3f> estimate_orienting_normals(const PointCloud& cloud, int k);
 
 }  // namespace scanclean
