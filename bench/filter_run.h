@@ -24,6 +24,7 @@ struct FilterSettings {
   //! first (as `scanclean filter --orient-normals`), used with FilterOptions::normals_orient_only;
   //! their time is part of seconds_wall.
   int orient_k = 0;
+  int scale_regions = 0;  //!< FilterOptions::scale_regions (0: one h for the cloud)
   std::string describe() const;
 };
 

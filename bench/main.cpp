@@ -134,6 +134,11 @@ int run(int argc, char** argv) {
             return ok ? std::string() : "expected 0 (off) or an integer in [6, 200], got " + s;
           },
           "0 or K in [6, 200]"));
+  int scale_regions = 0;
+  app.add_option("--scale-regions", scale_regions,
+                 "quality and real suites: robust_filter's scale_regions (a scale per region, "
+                 "as scanclean filter --scale-regions K; 0 = one h for the cloud)")
+      ->check(CLI::Range(0, 256));
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
@@ -162,6 +167,7 @@ int run(int argc, char** argv) {
   ctx.shape_names = shape_names;
   ctx.refit_spread = refit_spread;
   ctx.orient_normals = orient_normals;
+  ctx.scale_regions = scale_regions;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

@@ -71,6 +71,7 @@ void run_real_suite(Context& ctx) {
   fs.threads = ctx.threads;
   fs.refit_spread = ctx.refit_spread;
   fs.orient_k = ctx.orient_normals;
+  fs.scale_regions = ctx.scale_regions;
   FilterRun run = run_robust_filter(merged, fs);
   const DistanceStats before = distance_stats(md, merged.positions);
   const DistanceStats after = distance_stats(md, run.cloud.positions);

@@ -31,6 +31,8 @@ struct Context {
   //! quality and real suites: > 0 estimates and orients normals over this many neighbours
   //! before robust_filter (FilterSettings::orient_k)
   int orient_normals = 0;
+  //! quality and real suites: FilterOptions::scale_regions (0: one h for the cloud)
+  int scale_regions = 0;
   //! mesh suite: write its PNG pictures into this folder (empty: none)
   std::filesystem::path pictures_dir;
   std::vector<Table> tables;

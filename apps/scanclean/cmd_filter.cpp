@@ -279,7 +279,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   if (c.orient_normals > 0) sum.add("normals", orientation);
   sum.add("scale", std::string(scale_mode_name(o.scale)));
   sum.add("h", s.h * 1000.0, 3, "mm");
-  if (o.scale == ScaleMode::kAdaptive) {
+  if (o.scale == ScaleMode::kAdaptive || o.scale_regions > 0) {
     char range[96];
     std::snprintf(range, sizeof range, "%.3f .. %.3f mm (median shown as h)", s.h_min * 1000.0,
                   s.h_max * 1000.0);

@@ -22,6 +22,7 @@ struct FilterCliValues {
   int k_h = FilterOptions{}.k_h;
   double noise_factor = FilterOptions{}.noise_factor;
   double scale_gamma = FilterOptions{}.scale_gamma;
+  int scale_regions = FilterOptions{}.scale_regions;
   int kernel_stride = FilterOptions{}.kernel_stride;
   double likelihood_ratio = FilterOptions{}.likelihood_ratio;
   double displacement_sigma = FilterOptions{}.displacement_sigma;

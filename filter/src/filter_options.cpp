@@ -55,6 +55,10 @@ void validate(const FilterOptions& o) {
   check_real("truncation_sigma", o.truncation_sigma, 0, 10, true);
   check_real("noise_factor", o.noise_factor, 0, 20, true);
   check_real("scale_gamma", o.scale_gamma, 0, 20, false);
+  check_int("scale_regions", o.scale_regions, 0, 256);
+  if (o.scale_regions > 0 && (o.scale != ScaleMode::kAuto || !(o.scale_gamma > 0)))
+    bad_option("scale_regions", to_str(o.scale_regions),
+               "0 unless the scale is automatic with the scale test on (scale_gamma > 0)");
   check_int("kernel_stride", o.kernel_stride, 0, 64);
   check_real("slab", o.slab, 0, 10, true);
   check_real("eigen_floor", o.eigen_floor, 0, 1, true);

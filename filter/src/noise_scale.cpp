@@ -61,7 +61,17 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     so.sigma = std::max(ns.noise_sigma, o.eigen_floor * h);
     ns.reach = std::max(ns.reach, so.radii.back() * 1.0001);
     const NeighborIndex wide(pf, so.radii.back() * 0.7);
-    h = median_of(select_scale(in.p, wide, test_samples, so));
+    const std::vector<double> radii = select_scale(in.p, wide, test_samples, so);
+    h = median_of(radii);
+    if (o.scale_regions > 0) {
+      // A scale per region: each point's h_i from the radii chosen nearest to its cell of
+      // `index` (cells of h0), h their median (the grids are sized for it).
+      std::vector<Eigen::Vector3f> at;
+      at.reserve(test_samples.size());
+      for (std::size_t q : test_samples) at.push_back(pf[q]);
+      in.hi = region_scales(index, std::move(at), radii, static_cast<std::size_t>(o.scale_regions));
+      h = median_of(std::vector<double>(in.hi.begin(), in.hi.end()));
+    }
   }
   ns.h = h;
   return ns;

@@ -197,7 +197,13 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
   }
   in.h = h;
   sr.h = h;
-  if (o.scale != ScaleMode::kAdaptive) sr.h_min = sr.h_max = h;
+  if (in.hi.empty()) {
+    sr.h_min = sr.h_max = h;
+  } else if (o.scale != ScaleMode::kAdaptive) {  // a scale per region (scale_regions)
+    const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
+    sr.h_min = *mm.first;
+    sr.h_max = *mm.second;
+  }
   return sr;
 }
 

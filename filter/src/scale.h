@@ -16,7 +16,7 @@ namespace scanclean::detail {
 
 struct ScaleChoice {
   double h = 0;                 //!< the kernel size (kAdaptive: the median h_i)
-  double h_min = 0, h_max = 0;  //!< range of h_i (kAdaptive only)
+  double h_min = 0, h_max = 0;  //!< range of h_i (kAdaptive, scale_regions; else both h)
   double h0 = 0;                //!< kAuto: the median K_h-th neighbour distance
   double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise
   double noise_sigma_h0 = 0;    //!< kAuto: the same at h0

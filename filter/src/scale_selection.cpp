@@ -89,4 +89,37 @@ std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const Ne
   return out;
 }
 
+std::vector<float> region_scales(const NeighborIndex& cells, std::vector<Eigen::Vector3f> samples,
+                                 const std::vector<double>& radii, std::size_t k) {
+  const std::size_t n = cells.size();
+  std::vector<float> out(n, 0.0f);
+  if (samples.empty() || k == 0) return out;
+  const NeighborIndex tree(std::move(samples), 0.0);  // k-d tree only
+  const std::vector<std::uint32_t>& id = cells.order();
+  // Groups of slots [b, e) sharing one scale: the grid's cells, or single points.
+  const bool by_cell = cells.cell_count() > 0;
+  const std::size_t groups = by_cell ? cells.cell_count() : n;
+  auto begin = [&](std::size_t g) { return by_cell ? cells.cell_begin(g) : g; };
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 256),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::vector<std::pair<float, std::uint32_t>> nn;
+                      std::vector<double> near;
+                      for (std::size_t g = r.begin(); g != r.end(); ++g) {
+                        const std::size_t b = begin(g), e = begin(g + 1);
+                        Eigen::Vector3f c = Eigen::Vector3f::Zero();
+                        for (std::size_t s = b; s < e; ++s) c += cells.slot_point(s);
+                        c /= static_cast<float>(e - b);
+                        tree.knn(c, k, nn);
+                        near.clear();
+                        for (const auto& [d2, j] : nn) near.push_back(radii[j]);
+                        std::sort(near.begin(), near.end());
+                        const std::size_t m = near.size();
+                        const float v = static_cast<float>(
+                            m % 2 == 1 ? near[m / 2] : 0.5 * (near[m / 2 - 1] + near[m / 2]));
+                        for (std::size_t s = b; s < e; ++s) out[id[s]] = v;
+                      }
+                    });
+  return out;
+}
+
 }  // namespace scanclean::detail

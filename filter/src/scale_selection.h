@@ -35,4 +35,14 @@ std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const Ne
                                  const std::vector<std::size_t>& queries,
                                  const ScaleSelectionOptions& options);
 
+//! The scale per region (FilterOptions::scale_regions), one per grid cell of `cells` (an index
+//! over the cloud's points): the median of `radii` (one per sample, as select_scale returned
+//! them) over the k samples nearest to the centroid of the cell's points (summed in slot order;
+//! all samples when there are fewer; ties in distance broken by the sample's place; for an even
+//! k the mean of the two middle radii), given to every point of the cell. Indexed by the points'
+//! original indices. An index without a grid: per point. `samples` are the sample points
+//! (float, relative to the same origin). Deterministic, parallel.
+std::vector<float> region_scales(const NeighborIndex& cells, std::vector<Eigen::Vector3f> samples,
+                                 const std::vector<double>& radii, std::size_t k);
+
 }  // namespace scanclean::detail

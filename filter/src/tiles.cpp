@@ -438,6 +438,10 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
                         const TileSink& sink, const TileComm& comm) {
   validate(o);
   validate(t);
+  if (o.scale_regions > 0)
+    throw OptionError(
+        "--scale-regions: a scale per region needs the whole cloud in memory; it cannot run "
+        "tiled (raise --memory-budget)");
   const auto t_start = Clock::now();
   auto progress = [&](const std::string& phase, double f) {
     if (t.progress) t.progress(phase, f);

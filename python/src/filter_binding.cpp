@@ -34,6 +34,7 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["k_h"] = o.k_h;
   d["noise_factor"] = o.noise_factor;
   d["scale_gamma"] = o.scale_gamma;
+  d["scale_regions"] = o.scale_regions;
   d["kernel_stride"] = o.kernel_stride;
   d["k_adaptive"] = o.k_adaptive;
   d["k_min"] = o.k_min;
@@ -107,6 +108,8 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.noise_factor = as<double>(v, k);
     else if (k == "scale_gamma")
       o.scale_gamma = as<double>(v, k);
+    else if (k == "scale_regions")
+      o.scale_regions = as<int>(v, k);
     else if (k == "kernel_stride")
       o.kernel_stride = as<int>(v, k);
     else if (k == "k_adaptive")

@@ -221,6 +221,30 @@ TEST(ScancleanCliTest, ScaleGammaOptionReachesTheFilter) {
   EXPECT_EQ(run_filter({"--scale-gamma", "-1"}).exit_code, 2);
 }
 
+TEST(ScancleanCliTest, ScaleRegionsOptionReachesTheFilter) {
+  // A plane with a small sphere on it: --scale-regions gives a range of h (the summary shows
+  // it); out of range, or without the automatic scale, exit 2 before any work.
+  const auto dir = test::make_temp_dir("cli");
+  PointCloud cloud = test::noisy_plane(8000, 1.0, 0.002, 37);  // seed 37
+  PointCloud ball = test::noisy_sphere(800, 0.04, 0.001, 38);  // seed 38
+  for (auto& p : ball.positions) p += Eigen::Vector3d(-0.35, -0.35, 0.1);
+  append(cloud, ball);
+  cloud.normals.clear();
+  write_point_cloud(dir / "in.ply", cloud);
+  const ProgramRun one = run_filter_in(dir, {});
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  EXPECT_FALSE(contains(one.out, "h range:")) << one.out;
+  const ProgramRun regions = run_filter_in(dir, {"--scale-regions", "24"});
+  ASSERT_EQ(regions.exit_code, 0) << regions.err;
+  EXPECT_TRUE(contains(regions.out, "h range:")) << regions.out;
+  fs::remove(dir / "out.ply");
+  EXPECT_EQ(run_filter_in(dir, {"--scale-regions", "300"}).exit_code, 2);
+  const ProgramRun fixed = run_filter_in(dir, {"--scale-regions", "24", "--h", "0.05"});
+  EXPECT_EQ(fixed.exit_code, 2);
+  EXPECT_TRUE(contains(fixed.err, "scale_regions")) << fixed.err;
+  EXPECT_FALSE(fs::exists(dir / "out.ply"));
+}
+
 TEST(ScancleanCliTest, DisplacementOptionReachesTheFilter) {
   // Outliers 5-10 sigma off a noisy sphere are pulled onto it; the displacement test (on by
   // default) drops them and the summary counts them; --displacement-sigma 0 keeps them.

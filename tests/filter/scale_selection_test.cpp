@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -107,6 +108,54 @@ TEST(ScaleSelectionTest, TooFewNeighboursGiveTheSmallestRadius) {
   std::vector<std::size_t> q(c.p.size());
   for (std::size_t i = 0; i < q.size(); ++i) q[i] = i;
   for (double v : select_scale(c.p, index, q, o)) EXPECT_EQ(v, o.radii.front());
+}
+
+TEST(ScaleSelectionTest, RegionScalesAreTheMedianRadiusOfTheSamplesNearestToEachCell) {
+  // Against a brute-force oracle: for each grid cell the k samples nearest to the centroid of its
+  // points (by distance, then by place), the median of their radii (the mean of the middle two
+  // for even k), given to each of its points; without a grid, per point.
+  std::mt19937 rng(21);  // seed 21
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), r(0.01f, 0.05f);
+  std::vector<Eigen::Vector3f> points(800), samples(60);
+  std::vector<double> radii(samples.size());
+  for (auto& p : points) p = Eigen::Vector3f(u(rng), u(rng), u(rng));
+  for (std::size_t j = 0; j < samples.size(); ++j) {
+    samples[j] = Eigen::Vector3f(u(rng), u(rng), u(rng));
+    radii[j] = r(rng);
+  }
+  auto oracle = [&](const Eigen::Vector3f& q, std::size_t k) {
+    std::vector<std::pair<float, std::size_t>> by;
+    for (std::size_t j = 0; j < samples.size(); ++j)
+      by.push_back({(samples[j] - q).squaredNorm(), j});
+    std::sort(by.begin(), by.end());
+    const std::size_t m = std::min(k, samples.size());
+    std::vector<double> near;
+    for (std::size_t t = 0; t < m; ++t) near.push_back(radii[by[t].second]);
+    std::sort(near.begin(), near.end());
+    return static_cast<float>(m % 2 == 1 ? near[m / 2] : 0.5 * (near[m / 2 - 1] + near[m / 2]));
+  };
+  const NeighborIndex grid(points, 0.3);  // cells of 0.3: a few points each
+  const NeighborIndex no_grid(points, 0.0);
+  ASSERT_GT(grid.cell_count(), 50u);
+  ASSERT_LT(grid.cell_count(), points.size());
+  for (std::size_t k : {1u, 4u, 7u, 100u}) {
+    const std::vector<float> got = region_scales(grid, samples, radii, k);
+    ASSERT_EQ(got.size(), points.size());
+    for (std::size_t c = 0; c < grid.cell_count(); ++c) {
+      Eigen::Vector3f centroid = Eigen::Vector3f::Zero();
+      const std::uint32_t b = grid.cell_begin(c), e = grid.cell_begin(c + 1);
+      for (std::uint32_t s = b; s < e; ++s) centroid += grid.slot_point(s);
+      centroid /= static_cast<float>(e - b);
+      const float want = oracle(centroid, k);
+      for (std::uint32_t s = b; s < e; ++s)
+        ASSERT_FLOAT_EQ(got[grid.order()[s]], want) << "cell " << c << ", k " << k;
+    }
+    const std::vector<float> each = region_scales(no_grid, samples, radii, k);
+    for (std::size_t i = 0; i < points.size(); ++i)
+      ASSERT_FLOAT_EQ(each[i], oracle(points[i], k)) << "point " << i << ", k " << k;
+  }
+  const std::vector<float> none = region_scales(grid, {}, {}, 4);  // no samples: zeros
+  EXPECT_TRUE(std::all_of(none.begin(), none.end(), [](float v) { return v == 0; }));
 }
 
 }  // namespace

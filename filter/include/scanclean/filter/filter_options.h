@@ -51,6 +51,17 @@ struct FilterOptions {
   //! one (less bias). With 3 the filter beat CGAL jet on every shape, size and noise level of the
   //! benchmark; the noise rule alone lost to it at 50k points (bench/README.md, "Defaults").
   double scale_gamma = 3.0;
+  //! kAuto with the scale test: a scale per region instead of one for the cloud, [0, 256].
+  //! 0 (default): h is the median of the radii the scale test chose at its samples. k > 0: the
+  //! points of each grid cell (cells of h0 to 1.7 h0) take as h_i the median of the radii chosen
+  //! at the k samples nearest to the cell's centroid (about 2,500 samples spread over the
+  //! cloud, so k = 96 spans about 4 % of it), and h is the median h_i: a smaller h beside fine
+  //! detail, thin parts and creases, a larger one on smooth regions. Off by default: with
+  //! k = 96 the benchmark's shapes at the known limits came out up to 22 % closer (CD) and the
+  //! bunny mesh 3-9 %, but the torus and rounded box moved by up to +1.8 % (P2M +3 %) and the
+  //! merged bunny scans' p95 from 0.138 to 0.139 mm (bench/README.md, "Defaults"). Not in
+  //! tiled runs.
+  int scale_regions = 0;
   //! Kernels at every kernel_stride-th point (spatially even, in grid order), their weights
   //! multiplied by the stride, [0, 64]. 1: a kernel at every point (the paper). 0 (automatic):
   //! 1, unless the neighbourhoods hold more than K_h points: when kAuto raised h above h0 (for

@@ -83,7 +83,7 @@ struct FilterStats {
   //! Kernels refitted on their own plane (FilterOptions::refit_spread).
   std::size_t kernels_refitted = 0;
   double h = 0;                 //!< kernel size (metres); kAdaptive: median h_i
-  double h_min = 0, h_max = 0;  //!< range of h_i (equal to h unless kAdaptive)
+  double h_min = 0, h_max = 0;  //!< range of h_i (equal to h unless kAdaptive or scale_regions)
   double h0 = 0;                //!< kAuto: the neighbour-distance median before the noise check
   double mean_spacing = 0;      //!< s = h0 / sqrt(K_h / pi) (kAuto), else h / sqrt(K / pi) (metres)
   double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise (metres)
