@@ -4,7 +4,6 @@
 #if defined(SCANCLEAN_HAVE_IO) && defined(SCANCLEAN_HAVE_FILTER)
 
 #include <CLI/CLI.hpp>
-#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -45,9 +44,6 @@ struct FilterCommandOptions {
   double halo = 4.0;                     // --halo FACTOR
   int orient_normals = 0;                // --orient-normals K: 0 = off
 };
-
-// --orient-normals K: the range run_filter checks before any work (0 = off).
-constexpr int kOrientMinK = 6, kOrientMaxK = 200;
 
 void print_warnings(const std::string& file, const ReadReport& report) {
   for (const auto& w : report.warnings) std::fprintf(stderr, "scanclean: warning: %s\n", w.c_str());
@@ -186,13 +182,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
 
   check_mesh_output(*c.mesh, "filter");
   check_preview_path("filter", *c.preview);
-  if (c.orient_normals != 0 && (c.orient_normals < kOrientMinK || c.orient_normals > kOrientMaxK))
-    throw OptionError("--orient-normals: expected 0 (off) or an integer in [" +
-                      std::to_string(kOrientMinK) + ", " + std::to_string(kOrientMaxK) + "], got " +
-                      std::to_string(c.orient_normals));
-  if (c.orient_normals > 0 && !mesh_available())
-    throw UnavailableError(
-        "filter: --orient-normals needs the mesh module (CGAL), which this build lacks");
+  check_orient_normals(c.orient_normals, "filter");
   if (c.orient_normals > 0 && !o.use_sensor_normals)
     throw OptionError("filter: --orient-normals and --no-sensor-normals exclude each other");
 
@@ -243,7 +233,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
       o.normals_orient_only = true;
       char text[160];
       std::snprintf(text, sizeof text, "estimated (PCA over %d neighbours, MST over %d) in %.2f s",
-                    c.orient_normals, std::max(6, c.orient_normals / 2), on.seconds);
+                    c.orient_normals, on.mst_k, on.seconds);
       orientation = text;
     }
   }

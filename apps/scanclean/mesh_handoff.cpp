@@ -31,12 +31,18 @@ std::shared_ptr<MeshHandoff> add_mesh_option(CLI::App& cmd) {
   return m;
 }
 
-bool mesh_available() {
+void check_orient_normals(int k, const std::string& command) {
+  if (k == 0) return;
 #if defined(SCANCLEAN_HAVE_MESH)
-  return true;
+  if (k < kMinOrientingK || k > kMaxOrientingK)
+    throw OptionError("--orient-normals: expected 0 (off) or an integer in [" +
+                      std::to_string(kMinOrientingK) + ", " + std::to_string(kMaxOrientingK) +
+                      "], got " + std::to_string(k));
 #else
-  return false;
+  throw UnavailableError(command +
+                         ": --orient-normals needs the mesh module (CGAL), which this build lacks");
 #endif
+  (void)command;
 }
 
 OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k) {
@@ -44,6 +50,7 @@ OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k) {
   const auto t0 = std::chrono::steady_clock::now();
   OrientedNormals out;
   out.normals = estimate_orienting_normals(cloud, k);
+  out.mst_k = orienting_mst_k(k);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 #else

@@ -26,13 +26,15 @@ struct MeshHandoff {
   bool wanted() const { return !path.empty(); }
 };
 
-//! Whether this build has the mesh module (CGAL).
-bool mesh_available();
+//! Before any work: `--orient-normals k` (0 = off) must be in the mesh module's range and the
+//! mesh module must be built. \throw OptionError, UnavailableError.
+void check_orient_normals(int k, const std::string& command);
 
 //! Normals estimated for a cloud without them (the mesh module's estimate_orienting_normals: CGAL
-//! PCA normals over k neighbours, oriented by CGAL's MST over k / 2), and the seconds it took.
+//! PCA normals over k neighbours, oriented by CGAL's MST over mst_k), and the seconds it took.
 struct OrientedNormals {
   std::vector<Eigen::Vector3f> normals;
+  int mst_k = 0;
   double seconds = 0;
 };
 //! \throw UnavailableError without the mesh module; InputError for fewer than k + 1 points.

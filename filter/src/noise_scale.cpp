@@ -70,7 +70,7 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
       at.reserve(test_samples.size());
       for (std::size_t q : test_samples) at.push_back(pf[q]);
       in.hi = region_scales(index, std::move(at), radii, static_cast<std::size_t>(o.scale_regions));
-      h = median_of(std::vector<double>(in.hi.begin(), in.hi.end()));
+      h = median_of(in.hi);
     }
   }
   ns.h = h;

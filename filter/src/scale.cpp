@@ -189,9 +189,6 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       in.hi = std::move(hi);
       h = median_of(in.hi);
       if (!(h > 0)) h = fallback_h;
-      const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
-      sr.h_min = *mm.first;
-      sr.h_max = *mm.second;
       if (!(sr.index->cell() >= h * 1.001 && sr.index->cell() <= h * 1.7)) sr.index.reset();
     }
   }
@@ -199,7 +196,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
   sr.h = h;
   if (in.hi.empty()) {
     sr.h_min = sr.h_max = h;
-  } else if (o.scale != ScaleMode::kAdaptive) {  // a scale per region (scale_regions)
+  } else {  // kAdaptive, or a scale per region (scale_regions)
     const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
     sr.h_min = *mm.first;
     sr.h_max = *mm.second;

@@ -90,8 +90,12 @@ std::vector<Eigen::Vector3f> estimate_orienting_normals(const PointCloud& cloud,
                      " points; the cloud has " + std::to_string(cloud.size()));
   check_cloud(cloud);
   std::vector<Eigen::Vector3f> n = mesh_detail::pca_normals(cloud.positions, k);
-  mesh_detail::mst_orient(cloud.positions, n, std::max(6, k / 2));
+  mesh_detail::mst_orient(cloud.positions, n, orienting_mst_k(k));
   return n;
+}
+
+int orienting_mst_k(int k) {
+  return std::max(6, k / 2);
 }
 
 MeshResult reconstruct_surface(const PointCloud& cloud, const MeshOptions& o) {

@@ -110,5 +110,9 @@ std::vector<Eigen::Vector3f> estimate_normals(const PointCloud& cloud, int k = 1
 //! over 48), and over half of k it oriented the benchmark's shapes as well (bench/README.md,
 //! "Defaults"). \throw InputError for fewer than k + 1 points (or kMinMeshPoints).
 std::vector<Eigen::Vector3f> estimate_orienting_normals(const PointCloud& cloud, int k);
+//! The range of estimate_orienting_normals' k that `--orient-normals` accepts.
+constexpr int kMinOrientingK = 6, kMaxOrientingK = 200;
+//! The MST's neighbour count of estimate_orienting_normals for k: max(6, k / 2).
+int orienting_mst_k(int k);
 
 }  // namespace scanclean
