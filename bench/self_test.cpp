@@ -76,6 +76,28 @@ int self_test_main(std::uint64_t seed) {
     c.check(box->crease_distance(corner) < 1e-12 && box->crease_distance({0, 0, half_z}) > 0.1,
             "sharp_box: a corner lies on a crease, a face centre does not",
             box->crease_distance({0, 0, half_z}));
+    // closest_point: on the sphere the radial projection; on the box a point above a face drops
+    // straight onto it, and a point outside an edge (beyond two faces) lands on the edge.
+    {
+      auto sphere = make_sphere();
+      Rng prng(derive_seed(seed, 12));
+      double worst = 0;
+      for (int k = 0; k < 1000; ++k) {
+        const Eigen::Vector3d p(0.2 * prng.normal() + 0.6, 0.2 * prng.normal(), prng.normal());
+        worst = std::max(worst, (closest_point(*sphere, p) - p.normalized()).norm());
+      }
+      c.check(worst < 1e-7, "closest_point on the sphere is p / |p|, max error", worst);
+      const Eigen::Vector3d top(0.05, -0.03, half_z + 0.02);
+      const double face_err =
+          (closest_point(*box, top) - Eigen::Vector3d(0.05, -0.03, half_z)).norm();
+      c.check(face_err < 1e-7, "closest_point above a face of sharp_box drops onto it", face_err);
+      const Eigen::Vector3d m = box->box().max();
+      const Eigen::Vector3d beyond(0.1, m.y() + 0.01, m.z() + 0.02);
+      const double edge_err =
+          (closest_point(*box, beyond) - Eigen::Vector3d(0.1, m.y(), m.z())).norm();
+      c.check(edge_err < 1e-6, "closest_point beyond an edge of sharp_box lands on the edge",
+              edge_err);
+    }
     auto two = make_two_scale();
     const double big = two->distance(Eigen::Vector3d::Zero());  // the big sphere's radius
     c.check(std::abs(big - 0.62 / 0.88) < 1e-12, "two_scale: big sphere radius 0.62 / 0.88", big);

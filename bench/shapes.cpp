@@ -386,4 +386,24 @@ std::vector<std::unique_ptr<Shape>> limit_shapes() {
   return s;
 }
 
+Eigen::Vector3d closest_point(const Shape& s, const Eigen::Vector3d& p) {
+  Eigen::Vector3d x = p;
+  for (int step = 0; step < 8; ++step) {
+    const double d = s.distance(x);
+    if (d < 1e-9) break;
+    // The unsigned distance's gradient is the unit vector from the nearest surface point to x.
+    const double e = std::min(1e-6, 0.25 * d);
+    Eigen::Vector3d g;
+    for (int a = 0; a < 3; ++a) {
+      Eigen::Vector3d u = Eigen::Vector3d::Zero();
+      u[a] = e;
+      g[a] = s.distance(x + u) - s.distance(x - u);
+    }
+    const double len = g.norm();
+    if (!(len > 0)) break;  // on the medial axis: no unique nearest point
+    x -= d * (g / len);
+  }
+  return x;
+}
+
 }  // namespace scanclean::bench

@@ -61,6 +61,11 @@ std::unique_ptr<Shape> make_two_scale();
 //! The four shapes above, in that order.
 std::vector<std::unique_ptr<Shape>> limit_shapes();
 
+//! The point of s's surface nearest to p, where it is unique: p moved against the (central
+//! difference) gradient of the exact distance by that distance, repeated until the distance is
+//! below 1e-9 of the unit (at most 8 steps). The benchmark's ideal projection.
+Eigen::Vector3d closest_point(const Shape& s, const Eigen::Vector3d& p);
+
 //! A triangle mesh read with io's read_triangle_mesh and normalised (vertices' bounding-box centre
 //! to the origin, farthest vertex at radius 1); distances by eval::MeshDistance.
 //! \throw UnavailableError if the benchmark was built without the io/eval modules;
