@@ -48,7 +48,7 @@ struct RepresentativeTestInput {
   const std::vector<Eigen::Vector3d>* input_positions = nullptr;
   const std::vector<std::uint32_t>* input_index = nullptr;
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();
-  double cell = 0;            //!< grid cell of the representatives' index (h, or median h_i)
+  double cell = 0;            //!< grid cell of the representatives' index (ScaleChoice::h_grid)
   std::size_t stride = 1;     //!< kernel stride: the sums run over every stride-th representative
   std::size_t points_in = 0;  //!< input points (for the automatic minimum component size)
 };

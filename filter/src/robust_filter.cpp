@@ -229,7 +229,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
       (o.scale == ScaleMode::kAuto ? st.h0 : h) / std::sqrt(static_cast<double>(K) / M_PI);
   st.merge_eps = o.merge_eps < 0 ? 0.25 * st.mean_spacing : o.merge_eps;
   std::unique_ptr<NeighborIndex> index = std::move(scale.index);
-  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), h * 1.001);
+  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), scale.h_grid * 1.001);
   std::vector<Eigen::Vector3f>().swap(pf);
   if (o.scale == ScaleMode::kFixed) detail::check_fixed_scale(*index, h);
   // Spatial sort: everything from here on is stored and processed in grid order.
@@ -241,7 +241,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   detail::KernelParams prm;
   prm.options = &o;
   prm.oriented = use_v;
-  prm.cell = h;
+  prm.cell = scale.h_grid;
   prm.gather_factor = detail::candidate_radius(o);
   prm.stride = kernel_stride(o, h, st.h0);
   if (o.scale == ScaleMode::kAuto) prm.noise_sigma = std::max(st.noise_sigma, o.eigen_floor * h);

@@ -115,7 +115,6 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       sr.noise_sigma = ns.noise_sigma;
       sr.h_noise = ns.h_noise;
       h = ns.h;
-      if (!(sr.index->cell() >= h * 1.001 && sr.index->cell() <= h * 1.7)) sr.index.reset();
     } else {
       std::vector<float> hi(N);
       // Cell by cell: the points of the 27 cells around a cell are copied once into a compact
@@ -189,18 +188,24 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       in.hi = std::move(hi);
       h = median_of(in.hi);
       if (!(h > 0)) h = fallback_h;
-      if (!(sr.index->cell() >= h * 1.001 && sr.index->cell() <= h * 1.7)) sr.index.reset();
     }
   }
   in.h = h;
   sr.h = h;
+  sr.h_grid = h;
   if (in.hi.empty()) {
     sr.h_min = sr.h_max = h;
   } else {  // kAdaptive, or a scale per region (scale_regions)
     const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
     sr.h_min = *mm.first;
     sr.h_max = *mm.second;
+    std::vector<float> q = in.hi;
+    const auto at = q.begin() + static_cast<std::ptrdiff_t>((q.size() - 1) * 99 / 100);
+    std::nth_element(q.begin(), at, q.end());
+    sr.h_grid = std::clamp(static_cast<double>(*at), h, 1.7 * h);
   }
+  if (sr.index && !(sr.index->cell() >= sr.h_grid * 1.001 && sr.index->cell() <= sr.h_grid * 1.7))
+    sr.index.reset();
   return sr;
 }
 

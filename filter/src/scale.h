@@ -21,8 +21,13 @@ struct ScaleChoice {
   double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise
   double noise_sigma_h0 = 0;    //!< kAuto: the same at h0
   double h_noise = 0;           //!< kAuto: max(h0, noise_factor sigma), before scale selection
-  //! An index over pf with a cell between h and 1.7 h, when one was built on the way (else
-  //! null): the kernels phase reuses it.
+  //! The size the neighbour grids are made for: h, or with h_i the 99th percentile of h_i
+  //! (between h and 1.7 h). A query of radius r takes the grid's fast path (the 27 cells
+  //! around a point) only when r is at most the cell; sized for the median h_i, half of the
+  //! points took the slow one.
+  double h_grid = 0;
+  //! An index over pf with a cell between h_grid and 1.7 h_grid, when one was built on the way
+  //! (else null): the kernels phase reuses it.
   std::unique_ptr<NeighborIndex> index;
 };
 
