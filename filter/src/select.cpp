@@ -1,5 +1,7 @@
 #include "select.h"
 
+#include <immintrin.h>
+
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -29,6 +31,76 @@ float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
   const std::size_t r = k - before;
   std::nth_element(v, v + r, v + m);
   return v[r];
+}
+
+namespace {
+
+void band_scalar(const float* x, const float* y, const float* z, std::size_t b, std::size_t n,
+                 const float q[3], float lo2, float hi2, std::size_t& below, float* band,
+                 std::size_t& m) {
+  for (std::size_t j = b; j < n; ++j) {
+    const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    below += d2 < lo2 ? 1 : 0;
+    band[m] = d2;
+    m += (d2 >= lo2 && d2 < hi2) ? 1 : 0;
+  }
+}
+
+// For each 8-bit mask, the lanes of its set bits in increasing order (then zeros).
+struct LaneTable {
+  std::int32_t lane[256][8];
+  constexpr LaneTable() : lane{} {
+    for (int mask = 0; mask < 256; ++mask) {
+      int k = 0;
+      for (int bit = 0; bit < 8; ++bit)
+        if (mask & (1 << bit)) lane[mask][k++] = bit;
+    }
+  }
+};
+constexpr LaneTable kLanes;
+
+// AVX2 without FMA, so the squared distances round as in band_scalar.
+[[gnu::target("avx2")]] void band_avx2(const float* x, const float* y, const float* z,
+                                       std::size_t n, const float q[3], float lo2, float hi2,
+                                       std::size_t& below, float* band, std::size_t& m) {
+  const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
+  const __m256 lo = _mm256_set1_ps(lo2), hi = _mm256_set1_ps(hi2);
+  std::size_t j = 0, count = 0;
+  for (; j + 8 <= n; j += 8) {
+    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), qx);
+    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), qy);
+    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), qz);
+    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                    _mm256_mul_ps(dz, dz));
+    const __m256 under = _mm256_cmp_ps(d2, lo, _CMP_LT_OQ);
+    const __m256 in = _mm256_andnot_ps(under, _mm256_cmp_ps(d2, hi, _CMP_LT_OQ));
+    count += static_cast<std::size_t>(
+        __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under))));
+    const unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(in));
+    // Left-pack the band's lanes; all 8 are stored, m advances by the selected.
+    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLanes.lane[mask]));
+    _mm256_storeu_ps(band + m, _mm256_permutevar8x32_ps(d2, perm));
+    m += static_cast<std::size_t>(__builtin_popcount(mask));
+  }
+  below += count;
+  band_scalar(x, y, z, j, n, q, lo2, hi2, below, band, m);
+}
+
+bool have_avx2() {
+  static const bool yes = __builtin_cpu_supports("avx2");
+  return yes;
+}
+
+}  // namespace
+
+void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
+                          const float q[3], float lo2, float hi2, std::size_t& below, float* band,
+                          std::size_t& m) {
+  if (have_avx2())
+    band_avx2(x, y, z, n, q, lo2, hi2, below, band, m);
+  else
+    band_scalar(x, y, z, 0, n, q, lo2, hi2, below, band, m);
 }
 
 }  // namespace scanclean::detail

@@ -13,4 +13,14 @@ namespace scanclean::detail {
 //! upper <= 0; values outside [0, upper) go to the end bins, which keeps the result exact.
 float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper);
 
+//! The squared distances d2_j = |p_j - q|^2 of the n points p_j = (x[j], y[j], z[j]), rounded
+//! as (dx dx + dy dy) + dz dz in float: adds to `below` the number with d2_j < lo2, and appends
+//! to band[m, ...) those with lo2 <= d2_j < hi2 (m grows by their number; band needs room for
+//! m + n + 8 values). AVX2 where the processor has it, else scalar; the same results either way.
+//! With the count below a band that brackets rank k (below <= k < below + m), the k-th
+//! smallest of all the d2 is the (k - below)-th smallest of the band.
+void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
+                          const float q[3], float lo2, float hi2, std::size_t& below, float* band,
+                          std::size_t& m);
+
 }  // namespace scanclean::detail

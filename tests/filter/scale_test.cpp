@@ -49,7 +49,9 @@ TEST(ScaleTest, AdaptiveKernelSizesAreTheKthNeighbourDistances) {
   o.k_adaptive = 20;
   const ScaleChoice s = choose_scale(x.in, x.pf, 0.3, false, o);
   ASSERT_EQ(x.in.hi.size(), x.pf.size());
-  for (std::size_t i = 0; i < x.pf.size(); i += 7)
+  // Every point: most are found in the band around their cell's last distance, the first of a
+  // cell and the rest by the full search (scale.cpp).
+  for (std::size_t i = 0; i < x.pf.size(); ++i)
     EXPECT_NEAR(x.in.hi[i], kth_distance(x.pf, i, o.k_adaptive), 1e-7) << i;
   std::vector<float> sorted = x.in.hi;
   std::nth_element(sorted.begin(), sorted.begin() + (sorted.size() - 1) / 2, sorted.end());
@@ -57,6 +59,35 @@ TEST(ScaleTest, AdaptiveKernelSizesAreTheKthNeighbourDistances) {
   EXPECT_EQ(s.h_min, *std::min_element(x.in.hi.begin(), x.in.hi.end()));
   EXPECT_GT(s.h_max, 2.5 * s.h_min);
   EXPECT_EQ(x.in.h, s.h);
+  // The grids are sized for the 99th percentile of h_i, within [h, 1.7 h]: here the sparse
+  // part's h_i, far above the median, so 1.7 h.
+  std::vector<float> q = x.in.hi;
+  const std::size_t p99 = (q.size() - 1) * 99 / 100;
+  std::nth_element(q.begin(), q.begin() + static_cast<std::ptrdiff_t>(p99), q.end());
+  EXPECT_GT(q[p99], 1.7 * s.h);
+  EXPECT_DOUBLE_EQ(s.h_grid, 1.7 * s.h);
+}
+
+TEST(ScaleTest, GridsAreSizedForTheNinetyNinthPercentileOfTheAdaptiveSizes) {
+  // One density with a few far points: the 99th percentile lies between h and 1.7 h.
+  PointCloud c = test::noisy_plane(3000, 0.1, 0.002, 64);
+  Input x = input_of(c);
+  FilterOptions o;
+  o.scale = ScaleMode::kAdaptive;
+  o.k_adaptive = 30;
+  const ScaleChoice s = choose_scale(x.in, x.pf, 0.15, false, o);
+  std::vector<float> q = x.in.hi;
+  const std::size_t p99 = (q.size() - 1) * 99 / 100;
+  std::nth_element(q.begin(), q.begin() + static_cast<std::ptrdiff_t>(p99), q.end());
+  const double want = std::clamp(static_cast<double>(q[p99]), s.h, 1.7 * s.h);
+  EXPECT_EQ(s.h_grid, want);
+  EXPECT_GT(s.h_grid, s.h);
+  // One h: the grids are sized for it.
+  Input y = input_of(c);
+  FilterOptions fixed;
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = 0.01;
+  EXPECT_EQ(choose_scale(y.in, y.pf, 0.15, false, fixed).h_grid, 0.01);
 }
 
 TEST(ScaleTest, FixedScaleIsTakenAsGiven) {

@@ -55,5 +55,47 @@ TEST(SelectTest, ExactWithTiesAndValuesOutsideTheRange) {
   EXPECT_EQ(kth_smallest_below(s.data(), s.size(), 10, 0.0f), nth(v, 10));
 }
 
+// count_below_and_band against a plain loop over the same float arithmetic: random points
+// around q, counts of every length (the vector body and its scalar tail), bounds on values.
+TEST(SelectTest, BandCountsMatchAPlainLoopAndBracketTheKthDistance) {
+  std::mt19937 rng(63);  // seed 63
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int trial = 0; trial < 200; ++trial) {
+    const std::size_t n =
+        static_cast<std::size_t>(trial % 41) + static_cast<std::size_t>(rng() % 300);
+    std::vector<float> x(n), y(n), z(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      x[j] = u(rng);
+      y[j] = u(rng);
+      z[j] = 0.1f * u(rng);
+    }
+    if (n > 3) x[1] = x[0], y[1] = y[0], z[1] = z[0];  // a tie
+    const float q[3] = {0.1f * u(rng), 0.1f * u(rng), 0.0f};
+    const float lo2 = 0.2f + 0.2f * (u(rng) + 1), up2 = lo2 + 0.3f * (u(rng) + 1);
+    std::vector<float> all(n);
+    std::size_t want_below = 0;
+    std::vector<float> want_band;
+    for (std::size_t j = 0; j < n; ++j) {
+      const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
+      all[j] = dx * dx + dy * dy + dz * dz;
+      if (all[j] < lo2)
+        ++want_below;
+      else if (all[j] < up2)
+        want_band.push_back(all[j]);
+    }
+    std::size_t below = 5, m = 3;  // both add to what is there
+    std::vector<float> band(m + n + 8, -1.0f);
+    count_below_and_band(x.data(), y.data(), z.data(), n, q, lo2, up2, below, band.data(), m);
+    ASSERT_EQ(below, 5 + want_below) << trial;
+    ASSERT_EQ(m, 3 + want_band.size()) << trial;
+    EXPECT_TRUE(std::equal(want_band.begin(), want_band.end(), band.begin() + 3)) << trial;
+    // A band that brackets rank k holds the k-th smallest of all.
+    const std::size_t k = want_below + want_band.size() / 2;
+    if (want_band.empty() || k >= n) continue;
+    std::vector<float> b(band.begin() + 3, band.begin() + static_cast<std::ptrdiff_t>(m));
+    EXPECT_EQ(nth(b, k - want_below), nth(all, k)) << trial;
+  }
+}
+
 }  // namespace
 }  // namespace scanclean::detail
