@@ -6,6 +6,8 @@
 #include <cstring>
 #include <limits>
 
+#include "left_pack.h"
+
 // The 8-wide helpers below return vectors by value; they are always inlined into functions
 // compiled for AVX2 (see step_avx2), so the ABI note GCC gives for them does not apply.
 #pragma GCC diagnostic ignored "-Wpsabi"
@@ -274,19 +276,6 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
-// For each 8-bit mask, the indices of its set bits in increasing order (then zeros).
-struct PackTable {
-  std::int32_t lane[256][8];
-  constexpr PackTable() : lane{} {
-    for (int m = 0; m < 256; ++m) {
-      int k = 0;
-      for (int b = 0; b < 8; ++b)
-        if (m & (1 << b)) lane[m][k++] = b;
-    }
-  }
-};
-constexpr PackTable kPack;
-
 // AVX2 without FMA: the squared distances are rounded as in the scalar loop.
 [[gnu::target("avx2")]] std::size_t select_avx2(const float* x, const float* y, const float* z,
                                                 const std::uint32_t* slots, std::size_t n,
@@ -306,7 +295,7 @@ constexpr PackTable kPack;
     // Left-pack the selected lanes' slots: all 8 are stored at m <= j (so within n), the count
     // advances by the selected.
     const __m256i s = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots + j));
-    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kPack.lane[mask]));
+    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lane[mask]));
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + m), _mm256_permutevar8x32_epi32(s, perm));
     m += static_cast<std::size_t>(__builtin_popcount(mask));
   }

@@ -6,6 +6,8 @@
 #include <array>
 #include <cstdint>
 
+#include "left_pack.h"
+
 namespace scanclean::detail {
 
 float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
@@ -47,19 +49,6 @@ void band_scalar(const float* x, const float* y, const float* z, std::size_t b, 
   }
 }
 
-// For each 8-bit mask, the lanes of its set bits in increasing order (then zeros).
-struct LaneTable {
-  std::int32_t lane[256][8];
-  constexpr LaneTable() : lane{} {
-    for (int mask = 0; mask < 256; ++mask) {
-      int k = 0;
-      for (int bit = 0; bit < 8; ++bit)
-        if (mask & (1 << bit)) lane[mask][k++] = bit;
-    }
-  }
-};
-constexpr LaneTable kLanes;
-
 // AVX2 without FMA, so the squared distances round as in band_scalar.
 [[gnu::target("avx2")]] void band_avx2(const float* x, const float* y, const float* z,
                                        std::size_t n, const float q[3], float lo2, float hi2,
@@ -79,7 +68,7 @@ constexpr LaneTable kLanes;
         __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under))));
     const unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(in));
     // Left-pack the band's lanes; all 8 are stored, m advances by the selected.
-    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLanes.lane[mask]));
+    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lane[mask]));
     _mm256_storeu_ps(band + m, _mm256_permutevar8x32_ps(d2, perm));
     m += static_cast<std::size_t>(__builtin_popcount(mask));
   }
