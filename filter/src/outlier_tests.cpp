@@ -99,20 +99,29 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         parallel_each(sub.size(), [&](std::size_t k) { sub[k] = ridx.slot_point(k * stride); });
         thinned = std::make_unique<NeighborIndex>(std::move(sub), in.cell * 1.001);
       }
+      // The values the passes read of the points around: with a thinned index, copied into its
+      // slot order, so that the points of a query's cells are read from consecutive entries.
+      const std::size_t T = thinned ? thinned->size() : 0;
+      std::vector<std::uint32_t> cnt_t(T);
+      std::vector<float> lik_t(by_l ? T : 0), moved_t(by_d ? T : 0);
+      if (thinned) {
+        const std::vector<std::uint32_t>& id = thinned->order();
+        parallel_each(T, [&](std::size_t t) {
+          const std::size_t q = id[t] * stride;
+          cnt_t[t] = cnt[q];
+          if (by_l) lik_t[t] = lik[q];
+          if (by_d) moved_t[t] = moved[q];
+        });
+      }
+      const std::uint32_t* around_cnt = thinned ? cnt_t.data() : cnt.data();
+      const float* around_lik = thinned ? lik_t.data() : lik.data();
+      const float* around_moved = thinned ? moved_t.data() : moved.data();
       // Through the per-thread cell cache (cell_select.h): the same points as the index's own
-      // radius query.
+      // radius query. visit(a): a indexes around_cnt, around_lik and around_moved.
       const std::uint64_t cell_key = new_cell_cache_key();
       auto for_each_around = [&](std::size_t s, auto&& visit) {
-        CellSelect& sel = thread_cell_select();
-        if (thinned) {
-          const std::vector<std::uint32_t>& id = thinned->order();
-          sel.for_each_slot_within(
-              *thinned, cell_key, ridx.slot_point(s), hs[s],
-              [&](std::uint32_t t) { visit(static_cast<std::uint32_t>(id[t] * stride)); });
-        } else {
-          sel.for_each_slot_within(ridx, cell_key, ridx.slot_point(s), hs[s],
-                                   [&](std::uint32_t q) { visit(q); });
-        }
+        thread_cell_select().for_each_slot_within(thinned ? *thinned : ridx, cell_key,
+                                                  ridx.slot_point(s), hs[s], visit);
       };
       // Displacement test: the median of the moves around s and 1.4826 x their median absolute
       // deviation (the robust standard deviation), floored at 0.02 h; none (scale 0) when fewer
@@ -150,13 +159,13 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         const double l_s = by_l ? static_cast<double>(lik[s]) : 0.0;
         std::uint64_t sum = 0;
         std::size_t n_l = 0, at_or_below = 0;
-        for_each_around(s, [&](std::uint32_t q) {
-          sum += cnt[q];
+        for_each_around(s, [&](std::uint32_t a) {
+          sum += around_cnt[a];
           if (by_l) {
             ++n_l;
-            at_or_below += o.likelihood_ratio * static_cast<double>(lik[q]) <= l_s ? 1 : 0;
+            at_or_below += o.likelihood_ratio * static_cast<double>(around_lik[a]) <= l_s ? 1 : 0;
           }
-          if (anchor) around_d.push_back(moved[q]);
+          if (anchor) around_d.push_back(around_moved[a]);
         });
         rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
         if (by_l) low_l[s] = n_l > 0 && at_or_below <= n_l / 4 ? 1 : 0;
@@ -193,7 +202,7 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
             return;
           thread_local std::vector<float> around_d;
           around_d.clear();
-          for_each_around(s, [&](std::uint32_t q) { around_d.push_back(moved[q]); });
+          for_each_around(s, [&](std::uint32_t a) { around_d.push_back(around_moved[a]); });
           displaced[s] = is_displaced(s, move_stats(around_d, s)) ? 1 : 0;
         });
       const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
