@@ -65,7 +65,8 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     h = median_of(radii);
     if (o.scale_regions > 0) {
       // A scale per region: each point's h_i from the radii chosen nearest to its cell of
-      // `index` (cells of h0), h their median (the grids are sized for it).
+      // `index` (cells of h0), h their median (the later grids are sized for the h_i:
+      // ScaleChoice::h_grid).
       std::vector<Eigen::Vector3f> at;
       at.reserve(test_samples.size());
       for (std::size_t q : test_samples) at.push_back(pf[q]);

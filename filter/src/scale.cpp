@@ -170,6 +170,13 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
         for (std::uint32_t s = sr.index->cell_begin(c); s < sr.index->cell_begin(c + 1); ++s) {
           const Eigen::Vector3f& q = sr.index->slot_point(s);
           const float qx = q.x(), qy = q.y(), qz = q.z();
+          // The squared distance from q to a run's box: a run at least r away is skipped.
+          auto gap2 = [&](const Run& run) {
+            return (run.lo - q)
+                .cwiseMax(q - run.hi)
+                .cwiseMax(Eigen::Vector3f::Zero())
+                .squaredNorm();
+          };
           // Neighbouring points have nearly the same K-th distance: count the distances below
           // a band around the last one found and keep those inside it. When the band holds
           // rank K, the K-th distance is selected among its few values; else the full search
@@ -182,9 +189,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
               const float lo2 = lo * lo, up2 = up * up;
               std::size_t below = 0, m = 0;
               for (const Run& run : runs) {
-                const Eigen::Vector3f gap =
-                    (run.lo - q).cwiseMax(q - run.hi).cwiseMax(Eigen::Vector3f::Zero());
-                if (!(gap.squaredNorm() < up2)) continue;
+                if (!(gap2(run) < up2)) continue;
                 detail::count_below_and_band(bx.data() + run.b, by.data() + run.b,
                                              bz.data() + run.b, run.e - run.b, qa, lo2, up2, below,
                                              band.data(), m);
@@ -220,10 +225,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
           auto select = [&](float r2) {
             std::size_t n = 0;
             for (const Run& run : runs) {
-              // Skip a cell whose points' box is out of reach.
-              const Eigen::Vector3f gap =
-                  (run.lo - q).cwiseMax(q - run.hi).cwiseMax(Eigen::Vector3f::Zero());
-              if (!(gap.squaredNorm() < r2)) continue;
+              if (!(gap2(run) < r2)) continue;
               for (std::size_t j = run.b; j < run.e; ++j) {
                 const float dx = bx[j] - qx, dy = by[j] - qy, dz = bz[j] - qz;
                 d2[j] = dx * dx + dy * dy + dz * dz;
