@@ -118,9 +118,8 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   bool converged = false;
   Eigen::Vector3f nbar_out = nref;
   const Eigen::Vector3d start = x;
-  double prev_mu = 0;
-  double L = 0;  // at the last iterate where the sums were formed
-  constexpr double kMaxRatio = 0.8;
+  double prev_mu = 0, prev_step = 0;  // of the last normal step
+  double L = 0;                       // at the last iterate where the sums were formed
   for (int k = 0; k < o.max_iterations; ++k) {
     float xf[3];
     local_position(xf);
@@ -153,15 +152,12 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     // Both updates stop on the normal part |mu| (eq. 10 on the normal part, docs/ALGORITHM.md
     // section 3): the tangential part of m never dies out.
     if (o.update == UpdateMode::kNormal) {
-      // The mean shift converges linearly: along the normal, successive steps shrink by a
-      // nearly constant ratio r. When two steps agree in sign with r < 0.8, the step is
-      // extrapolated to the limit of the geometric series, mu / (1 - r) (Aitken); the stopping
-      // test still uses the measured mu, so the fixed point and the tolerance are unchanged.
-      double step = mu;
-      const double r = prev_mu != 0 ? mu / prev_mu : 0.0;
-      if (r > 0 && r < kMaxRatio) step = mu / (1 - r);
+      // Secant step along the normal (normal_step): the stopping test still uses the measured
+      // mu, so the fixed point and the tolerance are unchanged.
+      const double step = normal_step(mu, prev_mu, prev_step);
       x -= step * nb;
       prev_mu = mu;
+      prev_step = step;
     } else {
       x -= m;
     }
@@ -175,7 +171,8 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   }
   if (ctx.l_from_step) {
     // L where the last sums were formed: the last step of a converged point moved it by less
-    // than the tolerance, so evaluating L again there would cost a pass for nothing.
+    // than kMaxSecantFactor x the tolerance, so evaluating L again there would cost a pass for
+    // nothing.
     out.L = static_cast<float>(L);
   } else {
     float xf[3];
@@ -189,6 +186,14 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
 }
 
 }  // namespace
+
+double normal_step(double mu, double prev_mu, double prev_step) {
+  const double dmu = prev_mu - mu;
+  // dmu / prev_step estimates the slope c; it must be positive (a maximum ahead), and the
+  // factor 1 / c is capped.
+  if (prev_step == 0 || !(dmu * prev_step > 0)) return mu;
+  return mu * std::min(prev_step / dmu, kMaxSecantFactor);
+}
 
 double candidate_radius(const FilterOptions& o) {
   return std::max(1.0, o.truncation_sigma / 3.0) + kRegatherMargin;

@@ -45,6 +45,19 @@ struct Projected {
 constexpr double kRegatherMargin = 1.0 / 8;
 double candidate_radius(const FilterOptions& o);
 
+//! The step of the normal update (UpdateMode::kNormal) along the mean normal, given the normal
+//! part mu of the mean-shift vector at this iterate, and at the previous one prev_mu with the
+//! step prev_step taken from it (0 before the first). Near a maximum of L, mu is about c t at a
+//! distance t from it along the normal, and the plain step mu leaves (1 - c) t: with c small
+//! (a likelihood wide along the normal) the plain steps shrink slowly. The secant through the
+//! two iterates estimates c as (prev_mu - mu) / prev_step and returns mu / c, at most
+//! kMaxSecantFactor mu; where that slope is not positive (no maximum ahead along the normal, or
+//! the first iterate), the plain step mu. After plain steps this is Aitken's extrapolation,
+//! mu / (1 - r) with r = mu / prev_mu; it also damps oscillations (r < 0), where the step is
+//! shorter than mu.
+constexpr double kMaxSecantFactor = 5;
+double normal_step(double mu, double prev_mu, double prev_step);
+
 //! Projects every point x[i] of d (in place), with kernels ks. `nref` holds each point's own
 //! kernel normal (zero if none): the reference orientation where d has no sensor normal.
 //! `sparse[i]` != 0 drops point i before the projection (state kSparse). With

@@ -36,8 +36,9 @@
 //!  - Before the projection, points are dropped by the off-surface test (outlier_sigma) and by
 //!    the density test on their own kernel's support (tau); see the options. After it, the
 //!    converged points are dropped by the density, likelihood-ratio and displacement tests.
-//!  - The normal update is extrapolated (Aitken) when successive steps shrink by a steady ratio
-//!    r < 0.8; the stopping test uses the measured step, so the fixed points are unchanged.
+//!  - The normal update takes secant steps (at most 5x the measured step) once a previous
+//!    iterate gives the slope; the stopping test uses the measured step, so the fixed points
+//!    are unchanged.
 //!
 //! Known limits: two sheets closer than about 0.5 h collapse into one (at gaps of h or more
 //! they stay apart); sharp creases are rounded; curvature bias grows with h^2 / R; near open
