@@ -111,24 +111,39 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   parallel_each(nc, [&](std::size_t k) {
     joins[k] = pr.state[cand[k]] != ProjectionState::kNotConverged ? 1 : 0;
   });
-  // Grid of the candidates that join: (cell key, rank) sorted, a map from key to its run.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell;
-  by_cell.reserve(nc);
-  for (std::size_t k = 0; k < nc; ++k)
-    if (joins[k]) {
-      const Eigen::Vector3d& p = x[cand[k]];
-      by_cell.push_back({cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)),
-                         static_cast<std::uint32_t>(k)});
-    }
-  tbb::parallel_sort(by_cell.begin(), by_cell.end());
-  CellMap map(by_cell.size());
-  for (std::size_t j = by_cell.size(); j-- > 0;)
-    map.at(by_cell[j].first, 0) = static_cast<std::uint32_t>(j);
-  const double eps2 = eps * eps;
-  // Earlier neighbours of each joining candidate (rank < k, within eps, normals agreeing), with
-  // their squared distances, in compressed rows (counted, then filled).
-  auto for_each_earlier = [&](std::size_t k, auto&& f) {
+  // Grid of the candidates that join: (cell key, rank) sorted (those that do not join get the
+  // largest key and are cut off), their positions and normals copied into that order, and a map
+  // from each occupied cell's key to its run.
+  constexpr std::uint64_t kNoCell = ~0ULL;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell(nc);
+  parallel_each(nc, [&](std::size_t k) {
     const Eigen::Vector3d& p = x[cand[k]];
+    by_cell[k] = {joins[k] ? cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)) : kNoCell,
+                  static_cast<std::uint32_t>(k)};
+  });
+  tbb::parallel_sort(by_cell.begin(), by_cell.end());
+  while (!by_cell.empty() && by_cell.back().first == kNoCell) by_cell.pop_back();
+  const std::size_t nj = by_cell.size();
+  std::vector<Eigen::Vector3d> cell_x(nj);
+  std::vector<Eigen::Vector3f> cell_n(oriented ? nj : 0);
+  std::vector<std::uint8_t> run_start(nj);
+  parallel_each(nj, [&](std::size_t j) {
+    const std::uint32_t i = cand[by_cell[j].second];
+    cell_x[j] = x[i];
+    if (oriented) cell_n[j] = pr.normal[i];
+    run_start[j] = j == 0 || by_cell[j - 1].first != by_cell[j].first ? 1 : 0;
+  });
+  std::size_t runs = 0;
+  for (std::uint8_t r : run_start) runs += r;
+  CellMap map(runs);
+  for (std::size_t j = 0; j < nj; ++j)
+    if (run_start[j]) map.at(by_cell[j].first, 0) = static_cast<std::uint32_t>(j);
+  const double eps2 = eps * eps;
+  // Earlier neighbours of the joining candidate at by_cell[j] (rank < its rank, within eps,
+  // normals agreeing), with their squared distances, in compressed rows (counted, then filled).
+  auto for_each_earlier = [&](std::size_t j0, auto&& f) {
+    const std::uint32_t k = by_cell[j0].second;
+    const Eigen::Vector3d& p = cell_x[j0];
     std::int32_t a0[3], a1[3];
     for (int a = 0; a < 3; ++a) {
       a0[a] = coord(p[a] - eps, a);
@@ -140,13 +155,12 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
           const std::uint64_t key = cell_key(cx, cy, cz);
           const std::uint32_t* start = map.find(key);
           if (!start) continue;
-          for (std::size_t j = *start; j < by_cell.size() && by_cell[j].first == key; ++j) {
+          for (std::size_t j = *start; j < nj && by_cell[j].first == key; ++j) {
             const std::uint32_t q = by_cell[j].second;
             if (q >= k) continue;
-            const std::uint32_t s = cand[q];
-            const double d2 = (x[s] - p).squaredNorm();
+            const double d2 = (cell_x[j] - p).squaredNorm();
             if (!(d2 < eps2)) continue;
-            if (oriented && !(pr.normal[s].dot(pr.normal[cand[k]]) > 0)) continue;
+            if (oriented && !(cell_n[j].dot(cell_n[j0]) > 0)) continue;
             f(q, d2);
           }
         }
@@ -154,20 +168,20 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   // Both passes run in grid order (spatially coherent); the second only over the candidates
   // that have earlier neighbours at all (after the projection, few of them).
   std::vector<std::uint32_t> row(nc + 1, 0);
-  parallel_each(by_cell.size(), [&](std::size_t j) {
+  parallel_each(nj, [&](std::size_t j) {
     const std::uint32_t k = by_cell[j].second;
     std::uint32_t m = 0;
-    for_each_earlier(k, [&](std::uint32_t, double) { ++m; });
+    for_each_earlier(j, [&](std::uint32_t, double) { ++m; });
     row[k + 1] = m;
   });
   for (std::size_t k = 0; k < nc; ++k) row[k + 1] += row[k];
   std::vector<std::uint32_t> nb(row[nc]);
   std::vector<double> nb_d2(row[nc]);
-  parallel_each(by_cell.size(), [&](std::size_t j) {
+  parallel_each(nj, [&](std::size_t j) {
     const std::uint32_t k = by_cell[j].second;
     std::uint32_t m = row[k];
     if (m == row[k + 1]) return;
-    for_each_earlier(k, [&](std::uint32_t q, double d2) {
+    for_each_earlier(j, [&](std::uint32_t q, double d2) {
       nb[m] = q;
       nb_d2[m] = d2;
       ++m;
