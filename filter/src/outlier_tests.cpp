@@ -8,6 +8,7 @@
 #include "cell_select.h"
 #include "neighbor_index.h"
 #include "parallel.h"
+#include "select.h"
 
 namespace scanclean::detail {
 namespace {
@@ -144,6 +145,16 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         return m.scale > 0 && static_cast<double>(std::abs(moved[s] - m.median)) >
                                   o.displacement_sigma * static_cast<double>(m.scale);
       };
+      // The points around in a struct of arrays (the around index's slot order), for the
+      // one-pass counts of points that are not anchors (select.h count_within).
+      const NeighborIndex& aidx = thinned ? *thinned : ridx;
+      std::vector<float> ax(aidx.size()), ay(aidx.size()), az(aidx.size());
+      parallel_each(aidx.size(), [&](std::size_t t) {
+        const Eigen::Vector3f& p = aidx.slot_point(t);
+        ax[t] = p.x();
+        ay[t] = p.y();
+        az[t] = p.z();
+      });
       std::vector<double> rho(R, 0.0);
       std::vector<std::uint8_t> low_l(by_l ? R : 0, 0);
       const std::size_t anchors = by_d ? (R + kDisplacementAnchor - 1) / kDisplacementAnchor : 0;
@@ -157,6 +168,23 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         // <= L_s (ratio x L is monotone in L), so a count replaces the selection. No points
         // around (s is off the thinned subsample, and alone): Q1 would be L_s itself, kept.
         const double l_s = by_l ? static_cast<double>(lik[s]) : 0.0;
+        // Not an anchor, on the grid's fast path: the same points, counted in one pass.
+        const float r = hs[s];
+        const std::int64_t c = !anchor && r > 0 ? aidx.adjacent_cell(ridx.slot_point(s), r) : -1;
+        float bound = 0;
+        if (c >= 0 && (!by_l || largest_float_scaled_at_or_below(o.likelihood_ratio, l_s, bound))) {
+          const Eigen::Vector3f& q = ridx.slot_point(s);
+          const float qa[3] = {q.x(), q.y(), q.z()};
+          WithinCounts w;
+          aidx.for_each_adjacent_run(
+              static_cast<std::size_t>(c), [&](std::uint32_t b, std::uint32_t e) {
+                count_within(ax.data() + b, ay.data() + b, az.data() + b, around_cnt + b,
+                             by_l ? around_lik + b : nullptr, e - b, qa, r * r, bound, w);
+              });
+          rho[s] = static_cast<double>(w.sum) * static_cast<double>(stride);
+          if (by_l) low_l[s] = w.n > 0 && w.at_or_below <= w.n / 4 ? 1 : 0;
+          return;
+        }
         std::uint64_t sum = 0;
         std::size_t n_l = 0, at_or_below = 0;
         for_each_around(s, [&](std::uint32_t a) {

@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "left_pack.h"
 
@@ -76,6 +78,56 @@ void band_scalar(const float* x, const float* y, const float* z, std::size_t b, 
   band_scalar(x, y, z, j, n, q, lo2, hi2, below, band, m);
 }
 
+void within_scalar(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
+                   const float* lik, std::size_t b, std::size_t n, const float q[3], float r2,
+                   float lik_max, WithinCounts& out) {
+  for (std::size_t j = b; j < n; ++j) {
+    const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    if (!(d2 < r2)) continue;
+    out.sum += cnt[j];
+    ++out.n;
+    if (lik) out.at_or_below += lik[j] <= lik_max ? 1 : 0;
+  }
+}
+
+// AVX2 without FMA, so the squared distances round as in within_scalar. The cnt lanes sum in
+// 32 bits (the caller keeps a call's sum below 2^32).
+[[gnu::target("avx2")]] void within_avx2(const float* x, const float* y, const float* z,
+                                         const std::uint32_t* cnt, const float* lik, std::size_t n,
+                                         const float q[3], float r2, float lik_max,
+                                         WithinCounts& out) {
+  const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
+  const __m256 rr = _mm256_set1_ps(r2), lm = _mm256_set1_ps(lik_max);
+  __m256i sum = _mm256_setzero_si256();
+  std::size_t j = 0, within = 0, below = 0;
+  for (; j + 8 <= n; j += 8) {
+    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), qx);
+    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), qy);
+    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), qz);
+    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                    _mm256_mul_ps(dz, dz));
+    const __m256 in = _mm256_cmp_ps(d2, rr, _CMP_LT_OQ);
+    const __m256i c = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt + j));
+    sum = _mm256_add_epi32(sum, _mm256_and_si256(c, _mm256_castps_si256(in)));
+    within +=
+        static_cast<std::size_t>(__builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(in))));
+    if (lik) {
+      const __m256 le = _mm256_and_ps(in, _mm256_cmp_ps(_mm256_loadu_ps(lik + j), lm, _CMP_LE_OQ));
+      below += static_cast<std::size_t>(
+          __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(le))));
+    }
+  }
+  alignas(32) std::uint32_t lanes[8];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(lanes), sum);
+  std::uint32_t total = 0;
+  for (std::uint32_t v : lanes) total += v;
+  out.sum += total;
+  out.n += within;
+  out.at_or_below += below;
+  within_scalar(x, y, z, cnt, lik, j, n, q, r2, lik_max, out);
+}
+
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2");
   return yes;
@@ -90,6 +142,28 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
     band_avx2(x, y, z, n, q, lo2, hi2, below, band, m);
   else
     band_scalar(x, y, z, 0, n, q, lo2, hi2, below, band, m);
+}
+
+bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {
+  if (!(ratio > 0) || !(l >= 0) || !std::isfinite(l)) return false;
+  auto holds = [&](float v) { return ratio * static_cast<double>(v) <= l; };
+  float t = static_cast<float>(l / ratio);
+  if (!std::isfinite(t)) return false;
+  const float inf = std::numeric_limits<float>::infinity();
+  while (!holds(t)) t = std::nextafter(t, -inf);  // ends by 0, where it holds
+  while (t < std::numeric_limits<float>::max() && holds(std::nextafter(t, inf)))
+    t = std::nextafter(t, inf);
+  bound = t;
+  return true;
+}
+
+void count_within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
+                  const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
+                  WithinCounts& out) {
+  if (have_avx2())
+    within_avx2(x, y, z, cnt, lik, n, q, r2, lik_max, out);
+  else
+    within_scalar(x, y, z, cnt, lik, 0, n, q, r2, lik_max, out);
 }
 
 }  // namespace scanclean::detail

@@ -3,6 +3,7 @@
 //! the values are known to lie in a range [0, upper).
 
 #include <cstddef>
+#include <cstdint>
 
 namespace scanclean::detail {
 
@@ -22,5 +23,27 @@ float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper);
 void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
                           const float q[3], float lo2, float hi2, std::size_t& below, float* band,
                           std::size_t& m);
+
+//! The largest float v with ratio x double(v) <= l (in double), so that for every float v that
+//! test holds exactly when v <= bound (it is monotone in v for ratio > 0). False, leaving bound
+//! as it was, when ratio is not positive, l is negative or not finite, or l / ratio lies past
+//! float's range.
+bool largest_float_scaled_at_or_below(double ratio, double l, float& bound);
+
+//! What count_within found among the points within r.
+struct WithinCounts {
+  std::uint64_t sum = 0;        //!< sum of their cnt values
+  std::size_t n = 0;            //!< their number
+  std::size_t at_or_below = 0;  //!< their number with lik <= lik_max (0 without lik)
+};
+
+//! Over the n points p_j = (x[j], y[j], z[j]) with d2_j = |p_j - q|^2 < r2, rounded as in
+//! count_below_and_band: adds cnt[j] to out.sum, 1 to out.n, and 1 to out.at_or_below where
+//! lik[j] <= lik_max (lik null: none). One pass, no list of the points: the density and
+//! likelihood-ratio sums of the outlier tests. AVX2 or scalar, the same results. The cnt values
+//! of one call must sum below 2^32.
+void count_within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
+                  const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
+                  WithinCounts& out);
 
 }  // namespace scanclean::detail

@@ -1,12 +1,16 @@
 // kth_smallest_below (filter/src/select.h) against std::nth_element, the oracle: random values,
-// ties, values outside the stated range.
+// ties, values outside the stated range; the band and within counts against plain loops; the
+// float bound of a double test against the test itself.
 
 #include "../../filter/src/select.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -95,6 +99,72 @@ TEST(SelectTest, BandCountsMatchAPlainLoopAndBracketTheKthDistance) {
     std::vector<float> b(band.begin() + 3, band.begin() + static_cast<std::ptrdiff_t>(m));
     EXPECT_EQ(nth(b, k - want_below), nth(all, k)) << trial;
   }
+}
+
+TEST(SelectTest, CountWithinMatchesAPlainLoop) {
+  // The oracle: the scalar loop over every point, with the same rounding of the distances.
+  std::mt19937 rng(23);  // seed 23
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), l(0.0f, 2.0f);
+  std::uniform_int_distribution<std::uint32_t> c(1, 40);
+  for (std::size_t n : {0, 5, 8, 61, 300}) {
+    std::vector<float> x(n), y(n), z(n), lik(n);
+    std::vector<std::uint32_t> cnt(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      x[j] = u(rng);
+      y[j] = u(rng);
+      z[j] = u(rng);
+      lik[j] = l(rng);
+      cnt[j] = c(rng);
+    }
+    if (n > 3) lik[3] = 1.0f;  // a likelihood at the bound itself counts
+    const float q[3] = {0.1f, -0.2f, 0.05f}, r2 = 0.49f, lik_max = 1.0f;
+    std::uint64_t sum = 0;
+    std::size_t within = 0, below = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+      const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
+      if (!(dx * dx + dy * dy + dz * dz < r2)) continue;
+      sum += cnt[j];
+      ++within;
+      below += lik[j] <= lik_max ? 1 : 0;
+    }
+    WithinCounts w;
+    count_within(x.data(), y.data(), z.data(), cnt.data(), lik.data(), n, q, r2, lik_max, w);
+    EXPECT_EQ(w.sum, sum) << n;
+    EXPECT_EQ(w.n, within) << n;
+    EXPECT_EQ(w.at_or_below, below) << n;
+    if (n >= 61) {
+      EXPECT_GT(within, 0u);
+    }
+    WithinCounts no_lik;  // without likelihoods: the same sum and number, none at or below
+    count_within(x.data(), y.data(), z.data(), cnt.data(), nullptr, n, q, r2, lik_max, no_lik);
+    EXPECT_EQ(no_lik.sum, sum);
+    EXPECT_EQ(no_lik.n, within);
+    EXPECT_EQ(no_lik.at_or_below, 0u);
+  }
+}
+
+TEST(SelectTest, LargestFloatBoundDecidesTheDoubleTestExactly) {
+  // For every float v near the bound, ratio x v <= l in double holds exactly when v <= bound.
+  std::mt19937 rng(29);  // seed 29
+  std::uniform_real_distribution<double> lv(0.0, 10.0);
+  const float inf = std::numeric_limits<float>::infinity();
+  for (double ratio : {0.1, 0.25, 1.0 / 3.0, 0.5, 1.0, 7.0}) {
+    for (int t = 0; t < 200; ++t) {
+      const double l = t == 0 ? 0.0 : lv(rng);
+      float bound = -1;
+      ASSERT_TRUE(largest_float_scaled_at_or_below(ratio, l, bound));
+      float v = bound;
+      for (int s = 0; s < 4; ++s) v = std::nextafter(v, -inf);
+      for (int s = 0; s < 9; ++s, v = std::nextafter(v, inf))
+        EXPECT_EQ(ratio * static_cast<double>(v) <= l, v <= bound) << ratio << " " << l;
+    }
+  }
+  float bound = 5;
+  EXPECT_FALSE(largest_float_scaled_at_or_below(0.0, 1.0, bound));
+  EXPECT_FALSE(largest_float_scaled_at_or_below(0.5, -1.0, bound));
+  EXPECT_FALSE(largest_float_scaled_at_or_below(0.5, std::nan(""), bound));
+  EXPECT_FALSE(largest_float_scaled_at_or_below(0.5, 1e300, bound));
+  EXPECT_EQ(bound, 5);
 }
 
 }  // namespace
