@@ -132,13 +132,21 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
       };
       auto move_stats = [&](std::vector<float>& around, std::size_t s) {
         MoveStats m;
-        if (around.size() < 8) return m;
-        const auto mid = around.begin() + static_cast<std::ptrdiff_t>(around.size() / 2);
-        std::nth_element(around.begin(), mid, around.end());
-        m.median = *mid;
+        const std::size_t n = around.size();
+        if (n < 8) return m;
+        // Both selections by bins over the values' range (select.h), exact.
+        float lo = around[0], hi = around[0];
+        for (float v : around) {
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+        }
+        thread_local std::vector<float> scratch;  // the selection overwrites its input
+        scratch.assign(around.begin(), around.end());
+        m.median = kth_smallest_between(scratch.data(), n, n / 2, lo, hi);
         for (float& v : around) v = std::abs(v - m.median);
-        std::nth_element(around.begin(), mid, around.end());
-        m.scale = std::max(1.4826f * *mid, 0.02f * hs[s]);
+        const float mad =
+            kth_smallest_below(around.data(), n, n / 2, std::max(hi - m.median, m.median - lo));
+        m.scale = std::max(1.4826f * mad, 0.02f * hs[s]);
         return m;
       };
       auto is_displaced = [&](std::size_t s, const MoveStats& m) {

@@ -12,16 +12,17 @@
 
 namespace scanclean::detail {
 
-float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
+float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, float upper) {
   constexpr std::size_t kBins = 64;
-  if (n <= kBins || !(upper > 0)) {
+  const float scale = static_cast<float>(kBins) / (upper - lower);
+  if (n <= kBins || !(upper > lower) || !(scale > 0) || !std::isfinite(scale)) {
     std::nth_element(v, v + k, v + n);
     return v[k];
   }
-  const float scale = static_cast<float>(kBins) / upper;
-  // Monotone in x (a product with a positive constant, then clamped truncation); NaN goes last.
-  auto bin = [scale](float x) -> std::size_t {
-    const float t = x * scale;
+  // Monotone in x (a difference, a product with a positive constant, then clamped truncation);
+  // NaN goes last.
+  auto bin = [scale, lower](float x) -> std::size_t {
+    const float t = (x - lower) * scale;
     if (t >= static_cast<float>(kBins - 1) || t != t) return kBins - 1;
     return t >= 1.0f ? static_cast<std::size_t>(t) : 0;
   };
@@ -35,6 +36,10 @@ float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
   const std::size_t r = k - before;
   std::nth_element(v, v + r, v + m);
   return v[r];
+}
+
+float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
+  return kth_smallest_between(v, n, k, 0.0f, upper);
 }
 
 namespace {

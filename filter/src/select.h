@@ -13,6 +13,10 @@ namespace scanclean::detail {
 //! that holds rank k. Overwrites v (scratch). Falls back to std::nth_element for n <= 64 or
 //! upper <= 0; values outside [0, upper) go to the end bins, which keeps the result exact.
 float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper);
+//! As kth_smallest_below for values known to lie in [lower, upper): the bins split that range.
+//! Values outside it go to the end bins, which keeps the result exact; std::nth_element for
+//! n <= 64 or an empty or unrepresentable range.
+float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, float upper);
 
 //! The squared distances d2_j = |p_j - q|^2 of the n points p_j = (x[j], y[j], z[j]), rounded
 //! as (dx dx + dy dy) + dz dz in float: adds to `below` the number with d2_j < lo2, and appends
