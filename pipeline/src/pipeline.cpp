@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <map>
 #include <memory>
 #include <string>
 #include <utility>
@@ -36,6 +37,7 @@ std::size_t frame_bytes(const RangeFrame& f) {
 
 // One window on its way through the stages.
 struct Job {
+  std::size_t seq = 0;  // submission order: windows reach on_window in it
   std::size_t window = 0;
   std::uint64_t first_frame = 0;
   std::vector<RangeFrame> frames;
@@ -100,6 +102,43 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
   std::size_t peak_waiting = 0;
   std::uint64_t frames_recorded = 0;
 
+  // A serial node does not keep the order in which messages were put (a window put while
+  // the node frees up can overtake one queued before it), so the output stage restores the
+  // submission order: a window that arrives early waits for those before it.
+  auto emit = [&](const JobPtr& j) {
+    const WindowInput& in = j->input;  // moved-from cloud; the counts are intact
+    wc.min_pf =
+        wc.windows == 0 ? in.min_points_per_frame : std::min(wc.min_pf, in.min_points_per_frame);
+    wc.max_pf = std::max(wc.max_pf, in.max_points_per_frame);
+    ++wc.windows;
+    wc.points_in += in.points_in;
+    wc.points_fused += in.points_fused;
+    wc.fusion_rejected += in.fusion_rejected;
+    wc.edge_dropped += in.edge_dropped;
+    wc.out_of_range += in.out_of_range;
+    wc.no_normal += in.no_normal;
+    wc.seconds_points += in.seconds_points;
+    wc.seconds_filter += j->result.seconds_filter;
+    wc.outliers += j->result.filter.removed();
+    wc.points_out += j->result.cloud.size();
+    wc.frames_cleaned += in.frames;
+    WindowOutput out;
+    out.window = j->window;
+    out.first_frame = j->first_frame;
+    out.frames = in.frames;
+    out.last_frame = j->first_frame + in.frames - 1;
+    out.cloud = std::move(j->result.cloud);
+    out.outliers = std::move(j->result.outliers);
+    out.filter = j->result.filter;
+    out.input = std::move(j->result.input);
+    if (on_window) on_window(std::move(out));
+    const auto now = Clock::now();
+    for (const auto& t : j->arrival)
+      wc.latencies.push_back(std::chrono::duration<double>(now - t).count());
+    waiting_bytes -= j->bytes;
+  };
+  std::map<std::size_t, JobPtr> early;  // output stage only: windows ahead of next_out
+  std::size_t next_out = 0, next_seq = 0;
   std::unique_ptr<tbb::flow::graph> g;
   using Node = tbb::flow::function_node<JobPtr, JobPtr>;
   std::unique_ptr<Node> fuse_node, filter_node;
@@ -120,36 +159,13 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
     });
     out_node =
         std::make_unique<tbb::flow::function_node<JobPtr>>(*g, tbb::flow::serial, [&](JobPtr j) {
-          const WindowInput& in = j->input;  // moved-from cloud; the counts are intact
-          wc.min_pf = wc.windows == 0 ? in.min_points_per_frame
-                                      : std::min(wc.min_pf, in.min_points_per_frame);
-          wc.max_pf = std::max(wc.max_pf, in.max_points_per_frame);
-          ++wc.windows;
-          wc.points_in += in.points_in;
-          wc.points_fused += in.points_fused;
-          wc.fusion_rejected += in.fusion_rejected;
-          wc.edge_dropped += in.edge_dropped;
-          wc.out_of_range += in.out_of_range;
-          wc.no_normal += in.no_normal;
-          wc.seconds_points += in.seconds_points;
-          wc.seconds_filter += j->result.seconds_filter;
-          wc.outliers += j->result.filter.removed();
-          wc.points_out += j->result.cloud.size();
-          wc.frames_cleaned += in.frames;
-          WindowOutput out;
-          out.window = j->window;
-          out.first_frame = j->first_frame;
-          out.frames = in.frames;
-          out.last_frame = j->first_frame + in.frames - 1;
-          out.cloud = std::move(j->result.cloud);
-          out.outliers = std::move(j->result.outliers);
-          out.filter = j->result.filter;
-          out.input = std::move(j->result.input);
-          if (on_window) on_window(std::move(out));
-          const auto now = Clock::now();
-          for (const auto& t : j->arrival)
-            wc.latencies.push_back(std::chrono::duration<double>(now - t).count());
-          waiting_bytes -= j->bytes;
+          early.emplace(j->seq, std::move(j));
+          while (!early.empty() && early.begin()->first == next_out) {
+            const JobPtr k = std::move(early.begin()->second);
+            early.erase(early.begin());
+            emit(k);
+            ++next_out;
+          }
           return tbb::flow::continue_msg();
         });
     tbb::flow::make_edge(*fuse_node, *filter_node);
@@ -187,6 +203,7 @@ PipelineStats run_pipeline(RangeSource& source, const PipelineOptions& options,
       }
       wait_all();  // a file source (or the last window): wait for the backlog to be cleaned
     }
+    j->seq = next_seq++;
     waiting_bytes += j->bytes;
     peak_waiting = std::max(peak_waiting, waiting_bytes.load());
     fuse_node->try_put(std::move(j));  // queued in the stages' arena

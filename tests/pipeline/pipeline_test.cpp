@@ -93,6 +93,25 @@ TEST(PipelineTest, WindowsOfNFramesAndLastPartialWindow) {
   EXPECT_EQ(src.eos_calls, 1);
 }
 
+TEST(PipelineTest, WindowsReachTheCallbackInTheirOrder) {
+  // Sixty one-frame windows: the stages are serial but may take windows out of order (a window
+  // put while a stage frees up can overtake one queued before it); the callback sees them in
+  // order all the same. Before the output stage restored the order this failed now and then
+  // (the last, partial window of the test above overtook the one before it).
+  for (int run = 0; run < 5; ++run) {
+    ScriptedSource src(ok_frames(0, 60));
+    PipelineOptions o = raw_options();
+    o.accumulate = 1;
+    std::vector<WindowOutput> out;
+    run_pipeline(src, o, [&](WindowOutput&& w) { out.push_back(std::move(w)); });
+    ASSERT_EQ(out.size(), 60u);
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      EXPECT_EQ(out[k].window, k);
+      EXPECT_EQ(out[k].first_frame, k);
+    }
+  }
+}
+
 TEST(PipelineTest, FrameRangeAndAllInOne) {
   ScriptedSource src(ok_frames(10, 8));
   PipelineOptions o = raw_options();
