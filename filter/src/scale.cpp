@@ -195,9 +195,8 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
                                              band.data(), m);
               }
               if (below < kk && kk - 1 < below + m) {
-                const auto at = band.begin() + static_cast<std::ptrdiff_t>(kk - 1 - below);
-                std::nth_element(band.begin(), at, band.begin() + static_cast<std::ptrdiff_t>(m));
-                hi[ord[s]] = guess = std::sqrt(*at);
+                hi[ord[s]] = guess =
+                    std::sqrt(kth_smallest_between(band.data(), m, kk - 1 - below, lo2, up2));
                 found = true;
                 break;
               }

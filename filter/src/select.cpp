@@ -11,14 +11,52 @@
 #include "left_pack.h"
 
 namespace scanclean::detail {
+namespace {
+
+bool have_avx2();
+
+// The value of rank k among v[0, n) by counting, for each candidate, the values below it and at
+// or below it (8 at a time, the tail one by one); false when no value has rank k (a NaN among
+// them: comparisons with it are all false).
+[[gnu::target("avx2")]] bool rank_select_avx2(const float* v, std::size_t n, std::size_t k,
+                                              float& out) {
+  const std::size_t full = n - n % 8;
+  for (std::size_t i = 0; i < n; ++i) {
+    const __m256 x = _mm256_set1_ps(v[i]);
+    std::size_t lt = 0, le = 0;
+    for (std::size_t j = 0; j < full; j += 8) {
+      const __m256 y = _mm256_loadu_ps(v + j);
+      lt += static_cast<std::size_t>(__builtin_popcount(
+          static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(y, x, _CMP_LT_OQ)))));
+      le += static_cast<std::size_t>(__builtin_popcount(
+          static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(y, x, _CMP_LE_OQ)))));
+    }
+    for (std::size_t j = full; j < n; ++j) {
+      lt += v[j] < v[i] ? 1 : 0;
+      le += v[j] <= v[i] ? 1 : 0;
+    }
+    if (lt <= k && k < le) {
+      out = v[i];
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+float kth_smallest_small(float* v, std::size_t n, std::size_t k) {
+  float out = 0;
+  if (n <= kSmallSelect && have_avx2() && rank_select_avx2(v, n, k, out)) return out;
+  std::nth_element(v, v + k, v + n);
+  return v[k];
+}
 
 float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, float upper) {
   constexpr std::size_t kBins = 64;
   const float scale = static_cast<float>(kBins) / (upper - lower);
-  if (n <= kBins || !(upper > lower) || !(scale > 0) || !std::isfinite(scale)) {
-    std::nth_element(v, v + k, v + n);
-    return v[k];
-  }
+  if (n <= kBins || !(upper > lower) || !(scale > 0) || !std::isfinite(scale))
+    return kth_smallest_small(v, n, k);
   // Monotone in x (a difference, a product with a positive constant, then clamped truncation);
   // NaN goes last.
   auto bin = [scale, lower](float x) -> std::size_t {
@@ -33,9 +71,7 @@ float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, 
   std::size_t m = 0;
   for (std::size_t i = 0; i < n; ++i)
     if (bin(v[i]) == b) v[m++] = v[i];
-  const std::size_t r = k - before;
-  std::nth_element(v, v + r, v + m);
-  return v[r];
+  return kth_smallest_small(v, m, k - before);
 }
 
 float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {

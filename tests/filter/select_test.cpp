@@ -61,6 +61,23 @@ TEST(SelectTest, ExactWithTiesAndValuesOutsideTheRange) {
 
 // count_below_and_band against a plain loop over the same float arithmetic: random points
 // around q, counts of every length (the vector body and its scalar tail), bounds on values.
+TEST(SelectTest, SmallSelectionByCountingMatchesNthElement) {
+  // Every size up to kSmallSelect (whole vectors and tails), every rank, with ties.
+  std::mt19937 rng(71);  // seed 71
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (std::size_t n = 1; n <= kSmallSelect; ++n) {
+    std::vector<float> v(n);
+    for (auto& x : v) x = u(rng);
+    for (std::size_t i = 0; i + 2 < n; i += 5) v[i + 2] = v[i];
+    for (std::size_t k = 0; k < n; ++k) {
+      std::vector<float> scratch = v;
+      EXPECT_EQ(kth_smallest_small(scratch.data(), n, k), nth(v, k)) << "n " << n << " k " << k;
+    }
+  }
+  std::vector<float> equal(40, 0.5f);
+  EXPECT_EQ(kth_smallest_small(equal.data(), equal.size(), 17), 0.5f);
+}
+
 TEST(SelectTest, BetweenMatchesNthElementOnSignedValues) {
   // Moves along the normal (signed, Gaussian, offset) over their own range, as the displacement
   // test selects them: the median, then the median absolute deviation, each as nth_element.
