@@ -58,6 +58,35 @@ TEST(NeighborIndexTest, OrderIsAPermutation) {
   for (std::uint32_t i = 0; i < pts.size(); ++i) EXPECT_EQ(index.order()[index.slot_of(i)], i);
 }
 
+TEST(NeighborIndexTest, CellsAreContiguousWithTheirPointsInIndexOrder) {
+  // Fine cells over a wide extent: Morton codes of 42 bits (four passes of the radix sort) as
+  // well as the usual few. Each cell's points are one run of slots, in increasing index order
+  // (the sort is stable), and radius queries, which scan whole cells, match brute force.
+  std::mt19937 rng(13);  // seed 13
+  std::uniform_real_distribution<float> u(-5.0f, 5.0f);
+  std::vector<Eigen::Vector3f> pts;
+  for (int i = 0; i < 6000; ++i) pts.emplace_back(u(rng), u(rng), 0.001f * u(rng));
+  for (int i = 0; i < 300; ++i) pts.push_back(pts[static_cast<std::size_t>(i) * 7]);  // duplicates
+  for (double cell : {0.001, 0.3}) {
+    NeighborIndex index(pts, cell);
+    ASSERT_GT(index.cell_count(), 0u);
+    for (std::size_t c = 0; c < index.cell_count(); ++c)
+      for (std::uint32_t s = index.cell_begin(c) + 1; s < index.cell_begin(c + 1); ++s)
+        EXPECT_LT(index.order()[s - 1], index.order()[s]) << "cell " << c;
+    for (int k = 0; k < 40; ++k) {
+      const Eigen::Vector3f q = pts[static_cast<std::size_t>(k) * 7];
+      const float r = static_cast<float>(cell) * 0.9f;
+      std::vector<std::uint32_t> got, want;
+      index.for_each_within(q, r, [&](std::uint32_t i, float) { got.push_back(i); });
+      for (std::uint32_t i = 0; i < pts.size(); ++i)
+        if ((pts[i] - q).squaredNorm() < r * r) want.push_back(i);
+      std::sort(got.begin(), got.end());
+      EXPECT_EQ(got, want) << "cell " << cell << " query " << k;
+      EXPECT_GE(want.size(), 2u);  // itself and its duplicate at least
+    }
+  }
+}
+
 TEST(NeighborIndexTest, KnnMatchesBruteForce) {
   const auto pts = mixed_points(5);  // seed 5: fixed fixture
   for (double cell : {0.0, 0.05}) {
