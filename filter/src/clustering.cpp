@@ -1,7 +1,5 @@
 #include "clustering.h"
 
-#include <tbb/parallel_sort.h>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -9,6 +7,7 @@
 
 #include "neighbor_index.h"
 #include "parallel.h"
+#include "radix_sort.h"
 
 namespace scanclean::detail {
 namespace {
@@ -74,9 +73,13 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     return cl;
   }
   {
-    std::vector<std::pair<float, std::uint32_t>> key(cand.size());
-    for (std::size_t k = 0; k < cand.size(); ++k) key[k] = {-pr.L[cand[k]], cand[k]};
-    tbb::parallel_sort(key.begin(), key.end());  // decreasing L, then index: deterministic
+    // Decreasing L, then index (cand is in index order and the sort stable): deterministic.
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> key(cand.size()), scratch;
+    parallel_each(cand.size(), [&](std::size_t k) {
+      key[k] = {float_order_key(-pr.L[cand[k]]), cand[k]};
+    });
+    stable_radix_sort(
+        key, [](const auto& e) { return std::uint64_t{e.first}; }, scratch);
     for (std::size_t k = 0; k < cand.size(); ++k) cand[k] = key[k].second;
   }
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::max());
@@ -111,18 +114,36 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   parallel_each(nc, [&](std::size_t k) {
     joins[k] = pr.state[cand[k]] != ProjectionState::kNotConverged ? 1 : 0;
   });
-  // Grid of the candidates that join: (cell key, rank) sorted (those that do not join get the
-  // largest key and are cut off), their positions and normals copied into that order, and a map
-  // from each occupied cell's key to its run.
-  constexpr std::uint64_t kNoCell = ~0ULL;
+  // Grid of the candidates that join: (cell key, rank) sorted, their positions and normals
+  // copied into that order, and a map from each occupied cell's key to its run.
   std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell(nc);
   parallel_each(nc, [&](std::size_t k) {
     const Eigen::Vector3d& p = x[cand[k]];
-    by_cell[k] = {joins[k] ? cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)) : kNoCell,
+    by_cell[k] = {cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)),
                   static_cast<std::uint32_t>(k)};
   });
-  tbb::parallel_sort(by_cell.begin(), by_cell.end());
-  while (!by_cell.empty() && by_cell.back().first == kNoCell) by_cell.pop_back();
+  {
+    std::size_t m = 0;  // the joining ones, in rank order
+    for (std::size_t k = 0; k < nc; ++k)
+      if (joins[k]) by_cell[m++] = by_cell[k];
+    by_cell.resize(m);
+  }
+  if (!by_cell.empty()) {
+    // By cell key, then rank (by_cell is in rank order and the sort stable). The sort key
+    // packs the cell's (z, y, x) densely, in the order of cell_key, so that it has fewer bits.
+    std::uint64_t top[3] = {0, 0, 0};
+    constexpr std::uint64_t kMask = (1u << 21) - 1;
+    for (const auto& e : by_cell)
+      for (int a = 0; a < 3; ++a) top[a] = std::max(top[a], (e.first >> (21 * a)) & kMask);
+    const std::uint64_t nx = top[0] + 1, nxy = nx * (top[1] + 1);
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch;
+    stable_radix_sort(
+        by_cell,
+        [&](const auto& e) {
+          return (e.first & kMask) + nx * ((e.first >> 21) & kMask) + nxy * (e.first >> 42);
+        },
+        scratch);
+  }
   const std::size_t nj = by_cell.size();
   std::vector<Eigen::Vector3d> cell_x(nj);
   std::vector<Eigen::Vector3f> cell_n(oriented ? nj : 0);

@@ -1,5 +1,7 @@
 #include "neighbor_index.h"
 
+#include "radix_sort.h"
+
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -107,26 +109,11 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
                         entries[i] = {morton(x, y, z), static_cast<std::uint64_t>(i)};
                       }
                     });
-  // By Morton code, then id: a stable least-significant-digit radix sort on the code alone (the
-  // entries start in id order), 11 bits a pass over the bits the codes use (two passes for
-  // 2^22 cells).
+  // By Morton code, then id (the entries start in id order, and the sort is stable).
   {
-    std::uint64_t used = 0;
-    for (const Entry& e : entries) used |= e.morton;
-    int bits = 0;
-    while (bits < 64 && (used >> bits) != 0) ++bits;
-    constexpr int kDigit = 11;
-    constexpr std::size_t kBuckets = std::size_t{1} << kDigit;
-    std::vector<Entry> other(n);
-    std::vector<std::size_t> count(kBuckets);
-    for (int shift = 0; shift < bits; shift += kDigit) {
-      std::fill(count.begin(), count.end(), 0);
-      for (const Entry& e : entries) ++count[(e.morton >> shift) & (kBuckets - 1)];
-      std::size_t sum = 0;
-      for (std::size_t& c : count) sum += std::exchange(c, sum);
-      for (const Entry& e : entries) other[count[(e.morton >> shift) & (kBuckets - 1)]++] = e;
-      entries.swap(other);
-    }
+    std::vector<Entry> scratch;
+    detail::stable_radix_sort(
+        entries, [](const Entry& e) { return e.morton; }, scratch);
   }
   pts_.resize(n);
   ids_.resize(n);
