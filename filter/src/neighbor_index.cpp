@@ -1,7 +1,5 @@
 #include "neighbor_index.h"
 
-#include "radix_sort.h"
-
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -11,6 +9,8 @@
 #include <mutex>
 #include <nanoflann.hpp>
 #include <utility>
+
+#include "radix_sort.h"
 
 namespace scanclean {
 namespace {

@@ -1,6 +1,7 @@
 #pragma once
-//! Internal: selection of the k-th smallest value, exact and faster than std::nth_element when
-//! the values are known to lie in a range [0, upper).
+//! Internal: exact selections of the k-th smallest value, faster than std::nth_element (by
+//! counting for a few values, by bins when their range is known), and the 8-wide distance counts
+//! that feed them (the adaptive scale's bands, the outlier tests' sums).
 
 #include <cstddef>
 #include <cstdint>
@@ -17,12 +18,13 @@ float kth_smallest_small(float* v, std::size_t n, std::size_t k);
 //! The k-th smallest (0-based rank) of v[0, n), k < n, every value in [0, upper): the value
 //! std::nth_element would put at v[k]. Sorts the values into 64 equal bins of [0, upper) (a
 //! monotone map, so a bin's values lie between its neighbours'), then selects within the one bin
-//! that holds rank k. Overwrites v (scratch). Falls back to std::nth_element for n <= 64 or
-//! upper <= 0; values outside [0, upper) go to the end bins, which keeps the result exact.
+//! that holds rank k (kth_smallest_small). Overwrites v (scratch). kth_smallest_small alone for
+//! n <= 64 or upper <= 0; values outside [0, upper) go to the end bins, which keeps the result
+//! exact.
 float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper);
 //! As kth_smallest_below for values known to lie in [lower, upper): the bins split that range.
-//! Values outside it go to the end bins, which keeps the result exact; std::nth_element for
-//! n <= 64 or an empty or unrepresentable range.
+//! Values outside it go to the end bins, which keeps the result exact; kth_smallest_small alone
+//! for n <= 64 or an empty or unrepresentable range.
 float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, float upper);
 
 //! The squared distances d2_j = |p_j - q|^2 of the n points p_j = (x[j], y[j], z[j]), rounded
