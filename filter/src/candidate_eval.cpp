@@ -302,6 +302,47 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   return m;
 }
 
+// AVX2 without FMA, rounded as reach_scalar.
+[[gnu::target("avx2")]] std::size_t reach_avx2(const float* x, const float* y, const float* z,
+                                               const float* sigma, const std::uint32_t* slots,
+                                               std::size_t n, const float origin[3], float r2,
+                                               float scale, float margin, std::uint32_t* out) {
+  const __m256 ox = _mm256_set1_ps(origin[0]), oy = _mm256_set1_ps(origin[1]),
+               oz = _mm256_set1_ps(origin[2]), rr = _mm256_set1_ps(r2);
+  const __m256 sc = _mm256_set1_ps(scale), mg = _mm256_set1_ps(margin);
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; j += 8) {
+    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), ox);
+    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), oy);
+    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), oz);
+    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                    _mm256_mul_ps(dz, dz));
+    const __m256 reach = _mm256_add_ps(_mm256_mul_ps(sc, _mm256_loadu_ps(sigma + j)), mg);
+    const __m256 in = _mm256_and_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ),
+                                    _mm256_cmp_ps(d2, _mm256_mul_ps(reach, reach), _CMP_LT_OQ));
+    const unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(in));
+    const __m256i s = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots + j));
+    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lane[mask]));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + m), _mm256_permutevar8x32_epi32(s, perm));
+    m += static_cast<std::size_t>(__builtin_popcount(mask));
+  }
+  return m;
+}
+
+std::size_t reach_scalar(const float* x, const float* y, const float* z, const float* sigma,
+                         const std::uint32_t* slots, std::size_t n, const float origin[3], float r2,
+                         float scale, float margin, std::uint32_t* out) {
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; ++j) {
+    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    const float reach = scale * sigma[j] + margin;
+    out[m] = slots[j];
+    m += d2 < r2 && d2 < reach * reach ? 1u : 0u;
+  }
+  return m;
+}
+
 std::size_t select_scalar(const float* x, const float* y, const float* z,
                           const std::uint32_t* slots, std::size_t n, const float origin[3],
                           float r2, std::uint32_t* out) {
@@ -360,6 +401,13 @@ std::size_t select_within(const float* x, const float* y, const float* z,
                           float r2, std::uint32_t* out) {
   return have_avx2() ? select_avx2(x, y, z, slots, n, origin, r2, out)
                      : select_scalar(x, y, z, slots, n, origin, r2, out);
+}
+
+std::size_t select_within_reach(const float* x, const float* y, const float* z, const float* sigma,
+                                const std::uint32_t* slots, std::size_t n, const float origin[3],
+                                float r2, float scale, float margin, std::uint32_t* out) {
+  return have_avx2() ? reach_avx2(x, y, z, sigma, slots, n, origin, r2, scale, margin, out)
+                     : reach_scalar(x, y, z, sigma, slots, n, origin, r2, scale, margin, out);
 }
 
 float fast_exp(float a) {

@@ -31,6 +31,23 @@ class CellSelect {
   //! new_cell_cache_key() for this index.
   std::size_t select(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
                      float r);
+  //! As select, keeping only the slots s that also lie within scale sigma(s) + margin of q
+  //! (candidate_eval.h select_within_reach). sigma(s) is read once per cached cell neighbourhood
+  //! (the same function for every call with this key).
+  template <class Sigma>
+  std::size_t select_within_reach(const NeighborIndex& index, std::uint64_t key,
+                                  const Eigen::Vector3f& q, float r, Sigma&& sigma, float scale,
+                                  float margin) {
+    if (!(r > 0)) return 0;
+    const std::int64_t c = index.adjacent_cell(q, r);
+    Entry* e = c < 0 ? nullptr : entry(index, key, c);
+    if (!e) return kNotGrid;
+    if (e->sigma.size() != e->slot.size()) {
+      e->sigma.resize(e->slot.size());
+      for (std::size_t k = 0; k < e->slot.size(); ++k) e->sigma[k] = sigma(e->slot[k]);
+    }
+    return select_reach_in(*e, q, r, scale, margin);
+  }
   //! The slots of the last select (valid until the next call).
   const std::uint32_t* hits() const { return hit_.data(); }
 
@@ -54,7 +71,12 @@ class CellSelect {
     std::int64_t cell = -1;
     std::vector<float> x, y, z;  // padded with +inf to a multiple of 8
     std::vector<std::uint32_t> slot;
+    std::vector<float> sigma;  // per slot, when select_within_reach filled it (else empty)
   };
+  // The cached neighbourhood of cell c, copied in if absent; null when too crowded.
+  Entry* entry(const NeighborIndex& index, std::uint64_t key, std::int64_t c);
+  std::size_t select_reach_in(const Entry& e, const Eigen::Vector3f& q, float r, float scale,
+                              float margin);
   // One cell of a point grid spans several cells of a coarser grid: keep the last few.
   static constexpr std::size_t kEntries = 8;
   static constexpr std::size_t kMaxPoints = std::size_t{1} << 16;  // per entry

@@ -8,9 +8,10 @@
 namespace scanclean::detail {
 
 //! A kernel j of the likelihood (eq. 4): centre c_j, inverse covariance S_j^-1 (eigenvalues
-//! floored), normal n_j, squared support radius h_j^2 and weight w_j. Sixteen floats, read as
-//! one cache line and transposed eight at a time into the candidate buffer (candidate_eval.h);
-//! the field order is that buffer's.
+//! floored), normal n_j, squared support radius h_j^2, weight w_j, and the largest standard
+//! deviation sigma_j of S_j. Sixteen floats, read as one cache line and transposed eight at a
+//! time into the candidate buffer (candidate_eval.h); the field order is that buffer's, up to
+//! the weight.
 struct KernelRecord {
   static constexpr std::size_t kFloats = 16;
   enum Field : std::size_t {
@@ -28,6 +29,9 @@ struct KernelRecord {
     kNz,  //!< kernel normal (unit; the sensor normal, else the PCA normal)
     kH2,  //!< h_j^2 (m^2)
     kW,   //!< w_j (times the kernel stride)
+    //! sigma_j = sqrt of S_j's largest (floored) eigenvalue (m): as e_j(x) >= |x - c_j|^2 /
+    //! sigma_j^2, the kernel is truncated (e_j >= t^2) farther than t sigma_j from its centre.
+    kSigma,
   };
   float f[kFloats] = {};
 
@@ -35,9 +39,11 @@ struct KernelRecord {
   Eigen::Vector3f normal() const { return {f[kNx], f[kNy], f[kNz]}; }
   float h2() const { return f[kH2]; }
   float weight() const { return f[kW]; }
-  //! Sets every field; s_inv symmetric.
+  float sigma() const { return f[kSigma]; }
+  //! Sets every field; s_inv symmetric, the inverse of a covariance whose largest eigenvalue is
+  //! sigma^2.
   void set(const Eigen::Vector3d& c, const Eigen::Matrix3d& s_inv, const Eigen::Vector3f& n,
-           double h2, float w) {
+           double h2, float w, double sigma) {
     for (int k = 0; k < 3; ++k) f[kCx + k] = static_cast<float>(c[k]);
     f[kQ00] = static_cast<float>(s_inv(0, 0));
     f[kQ11] = static_cast<float>(s_inv(1, 1));
@@ -48,6 +54,7 @@ struct KernelRecord {
     for (int k = 0; k < 3; ++k) f[kNx + k] = n[k];
     f[kH2] = static_cast<float>(h2);
     f[kW] = w;
+    f[kSigma] = static_cast<float>(sigma);
   }
 };
 static_assert(sizeof(KernelRecord) == 16 * sizeof(float), "one cache line per kernel");

@@ -1,6 +1,7 @@
 #include "kernels.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 #include "cell_select.h"
@@ -83,11 +84,12 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     if (prm.support) (*prm.support)[i] = static_cast<float>(fit.weight - 1.0);
     if (!(d.w_at(i) > 0)) return;  // a zero-weight kernel contributes nothing
     const double h2 = h * h;
-    Eigen::Vector3d inv;
-    for (int a = 0; a < 3; ++a) inv[a] = 1.0 / std::max(fit.lambda[a], floor2 * h2);
-    const Eigen::Matrix3d s_inv = fit.e * inv.asDiagonal() * fit.e.transpose();
+    Eigen::Vector3d var;
+    for (int a = 0; a < 3; ++a) var[a] = std::max(fit.lambda[a], floor2 * h2);
+    const Eigen::Matrix3d s_inv = fit.e * var.cwiseInverse().asDiagonal() * fit.e.transpose();
     const std::size_t k = candidate(i);
-    records[k].set(fit.c, s_inv, fit.n, h2, d.w_at(i) * static_cast<float>(stride_at(i)));
+    records[k].set(fit.c, s_inv, fit.n, h2, d.w_at(i) * static_cast<float>(stride_at(i)),
+                   std::sqrt(var.maxCoeff()));
     if (prm.keep_fits) fits[k].set(fit.m, fit.weight, fit.cov);
     valid[k] = 1;
   });

@@ -15,7 +15,12 @@ struct ProjectionContext {
   std::uint64_t cell_key = 0;  // the kernel index's key in the thread-local cell caches
   const KernelSet* ks = nullptr;
   const FilterOptions* o = nullptr;
-  float t2 = 9;                // truncation_sigma^2
+  float t2 = 9;  // truncation_sigma^2
+  // A kernel j is gathered only within reach_scale sigma_j + kRegatherMargin h of where the
+  // gather is (KernelRecord::kSigma): farther, it is truncated wherever the point can be before
+  // it gathers again. For the first gather of a point the off-surface test also reads, up to
+  // outlier_sigma instead of truncation_sigma.
+  float reach_scale = 3, first_reach_scale = 3;
   float slab2 = 1;             // slab^2
   bool l_from_step = true;     // slab >= 1: the step keeps every kernel L keeps (StepSums)
   double gather_factor = 1;    // candidate_radius
@@ -25,10 +30,13 @@ struct ProjectionContext {
 // The fast path of the gather (cell_select.h): the same candidates, in the same order, as the
 // loop over for_each_cell_run's runs below (the same cells, in the same order, and the same
 // distance test).
-bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float r,
-                 CandidateBuffer& buf) {
+bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float r, float scale,
+                 float margin, CandidateBuffer& buf) {
   CellSelect& sel = thread_cell_select();
-  const std::size_t n = sel.select(*ctx.ks->index, ctx.cell_key, of, r);
+  const KernelRecord* records = ctx.ks->records.data();
+  const std::size_t n = sel.select_within_reach(
+      *ctx.ks->index, ctx.cell_key, of, r, [&](std::uint32_t s) { return records[s].sigma(); },
+      scale, margin);
   if (n == CellSelect::kNotGrid) return false;
   const float origin[3] = {of.x(), of.y(), of.z()};
   buf.clear();
@@ -38,12 +46,14 @@ bool gather_cell(const ProjectionContext& ctx, const Eigen::Vector3f& of, float 
 }
 
 // The candidate kernels of a point at `of`: every kernel whose centre lies within
-// gather_factor h (candidate_radius), relative to `of`.
-void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
+// gather_factor h (candidate_radius) and within scale sigma_j + kRegatherMargin h, relative to
+// `of`.
+void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h, float scale,
             CandidateBuffer& buf) {
   const KernelSet& ks = *ctx.ks;
   const float r = static_cast<float>(ctx.gather_factor * h), r2 = r * r;
-  if (gather_cell(ctx, of, r, buf)) return;
+  const float margin = static_cast<float>(kRegatherMargin * h);
+  if (gather_cell(ctx, of, r, scale, margin, buf)) return;
   const float origin[3] = {of.x(), of.y(), of.z()};
   buf.clear();
   const KernelRecord* records = ks.records.data();
@@ -56,15 +66,19 @@ void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h,
       for (std::uint32_t s = s0; s < s1; ++s) {  // branch-free selection on compact centres
         const float* k = ks.index->slot_point(s).data();
         const float dx = k[0] - origin[0], dy = k[1] - origin[1], dz = k[2] - origin[2];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        const float reach = scale * records[s].sigma() + margin;  // as select_within_reach
         hit[n] = s;
-        n += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
+        n += d2 < r2 && d2 < reach * reach ? 1u : 0u;
       }
       append_records(buf, records, hit, n, origin, ctx.slab2);
     }
   });
   if (!grid)
-    ks.index->for_each_slot_within(
-        of, r, [&](std::uint32_t s, float) { buf.push_record(s, records[s], origin, ctx.slab2); });
+    ks.index->for_each_slot_within(of, r, [&](std::uint32_t s, float d2) {
+      const float reach = scale * records[s].sigma() + margin;
+      if (d2 < reach * reach) buf.push_record(s, records[s], origin, ctx.slab2);
+    });
   buf.finish();
 }
 
@@ -86,7 +100,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   bool have_ref = nref.squaredNorm() > 0.5f;
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
-  gather(ctx, of, h, buf);
+  gather(ctx, of, h, ctx.first_reach_scale, buf);
   // The first step reuses the e_j and d_j of the off-surface test, at the same position.
   bool first_step_ready = false;
   if (ctx.off_surface.threshold2 > 0 && buf.count > 0) {
@@ -108,7 +122,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     if ((x - origin).norm() > regather) {
       of = x.cast<float>();
       origin = of.cast<double>();
-      gather(ctx, of, h, buf);
+      gather(ctx, of, h, ctx.reach_scale, buf);
       first_step_ready = false;
     }
     const Eigen::Vector3d xl = x - origin;
@@ -208,12 +222,19 @@ void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen
   ctx.ks = &ks;
   ctx.o = &o;
   ctx.t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
+  // 1 % more: the kernels' S_j^-1 and sigma_j are rounded to float, and so are e_j and the
+  // distances.
+  ctx.reach_scale = static_cast<float>(1.01 * o.truncation_sigma);
   ctx.slab2 = static_cast<float>(o.slab * o.slab);
   ctx.l_from_step = o.slab >= 1;
   ctx.gather_factor = candidate_radius(o);
   ctx.off_surface.kernels = &ks;
-  if (off_surface_test && !ks.fits.empty())
+  ctx.first_reach_scale = ctx.reach_scale;
+  if (off_surface_test && !ks.fits.empty()) {
     ctx.off_surface.threshold2 = static_cast<float>(o.outlier_sigma * o.outlier_sigma);
+    ctx.first_reach_scale =
+        static_cast<float>(1.01 * std::max(o.truncation_sigma, o.outlier_sigma));
+  }
   ctx.off_surface.floor2 = o.eigen_floor * o.eigen_floor;
   ctx.off_surface.oriented = oriented;
   const std::size_t n = x.size();

@@ -41,7 +41,11 @@ struct Projected {
 //! kRegatherMargin h from there. So the kernels within max(1, truncation_sigma / 3) h of the
 //! point, the reach of the truncated kernels of a neighbourhood of radius h, are always among
 //! them. A narrow margin keeps the lists short (every iteration evaluates every candidate); a
-//! point that moves farther gathers again.
+//! point that moves farther gathers again. Of those kernels, a gather keeps only the ones within
+//! 1.01 truncation_sigma sigma_j + kRegatherMargin h (KernelRecord::kSigma): the others are
+//! truncated wherever the point can be before it gathers again (e_j >= |x - c_j|^2 / sigma_j^2),
+//! so they would add nothing. A point's first gather, which the off-surface test also reads, uses
+//! the larger of truncation_sigma and outlier_sigma instead.
 constexpr double kRegatherMargin = 1.0 / 8;
 double candidate_radius(const FilterOptions& o);
 

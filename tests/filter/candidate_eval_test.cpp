@@ -31,7 +31,7 @@ std::vector<KernelRecord> random_kernels(int n, std::uint32_t seed) {
                                  std::pow(0.5 * h * (1 + u(rng)), 2));
     const Eigen::Matrix3d s_inv = rot * lambda.cwiseInverse().asDiagonal() * rot.transpose();
     const Eigen::Vector3f n = rot.col(0).cast<float>();
-    k[j].set(c, s_inv, n, h * h, static_cast<float>(0.2 + u(rng)));
+    k[j].set(c, s_inv, n, h * h, static_cast<float>(0.2 + u(rng)), std::sqrt(lambda.maxCoeff()));
   }
   return k;
 }
@@ -192,6 +192,102 @@ TEST(CandidateEvalTest, SelectWithinEqualsTheScalarDistanceTest) {
   EXPECT_EQ(out, expected);
   EXPECT_GT(expected.size(), 50u);  // both sides of the sphere are present
   EXPECT_LT(expected.size(), 150u);
+}
+
+TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
+  // The oracle: the step sums over every kernel. Dropping the kernels farther from the gather
+  // origin than 3.03 sigma_j + margin (select_within_reach, as the projection's regathers do)
+  // changes no sum beyond rounding, for points anywhere within the margin.
+  const float t2 = 9, slab2 = 1, scale = 3.03f, margin = 0.00125f;  // h / 8 at h = 1 cm
+  std::mt19937 rng(31);                                             // seed 31
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::size_t dropped = 0, total = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const int n = 150;
+    std::vector<KernelRecord> k = random_kernels(n, 500 + trial);
+    for (KernelRecord& r : k)  // spread the centres (2.4 h) beyond most kernels' reach
+      for (std::size_t a = KernelRecord::kCx; a <= KernelRecord::kCz; ++a) r.f[a] *= 4;
+    const float origin[3] = {0.003f * u(rng), 0.003f * u(rng), 0.0005f * u(rng)};
+    std::vector<float> x(n), y(n), z(n), sigma(n);
+    std::vector<std::uint32_t> all(n), kept(n + 8);
+    for (int j = 0; j < n; ++j) {
+      x[j] = k[j].f[KernelRecord::kCx];
+      y[j] = k[j].f[KernelRecord::kCy];
+      z[j] = k[j].f[KernelRecord::kCz];
+      sigma[j] = k[j].sigma();
+      all[j] = static_cast<std::uint32_t>(j);
+    }
+    while (x.size() % 8 != 0) {
+      x.push_back(std::numeric_limits<float>::infinity());
+      y.push_back(std::numeric_limits<float>::infinity());
+      z.push_back(std::numeric_limits<float>::infinity());
+      sigma.push_back(0);
+      all.push_back(0);
+    }
+    const std::size_t m =
+        select_within_reach(x.data(), y.data(), z.data(), sigma.data(), all.data(), x.size(),
+                            origin, 1.0f, scale, margin, kept.data());
+    dropped += static_cast<std::size_t>(n) - m;
+    total += static_cast<std::size_t>(n);
+    CandidateBuffer every, reached;
+    every.clear();
+    reached.clear();
+    append_records(every, k.data(), all.data(), static_cast<std::size_t>(n), origin, slab2);
+    append_records(reached, k.data(), kept.data(), m, origin, slab2);
+    every.finish();
+    reached.finish();
+    const float nref[3] = {0, 0, 1};
+    for (int p = 0; p < 10; ++p) {
+      Eigen::Vector3f d(u(rng), u(rng), u(rng));
+      d *= 0.999f * margin / std::max(d.norm(), 1e-6f) * std::abs(u(rng));
+      const float xf[3] = {d.x(), d.y(), d.z()};
+      StepSums a, b;
+      const bool ka = step_sums(every, xf, nref, t2, a), kb = step_sums(reached, xf, nref, t2, b);
+      ASSERT_EQ(ka, kb) << "trial " << trial;
+      if (!ka) continue;
+      EXPECT_EQ(a.e_min, b.e_min);
+      EXPECT_NEAR(a.s, b.s, 1e-6 * a.s);
+      for (int ax = 0; ax < 3; ++ax) {
+        EXPECT_NEAR(a.dn[ax], b.dn[ax], 1e-6 * a.s * 0.01);
+        EXPECT_NEAR(a.n[ax], b.n[ax], 1e-6 * a.s);
+      }
+      EXPECT_NEAR(a.likelihood(), b.likelihood(), 1e-6 * a.likelihood() + 1e-15);
+    }
+  }
+  EXPECT_GT(dropped, total / 3);  // the filter does drop kernels here
+}
+
+TEST(CandidateEvalTest, SelectWithinReachEqualsTheScalarTests) {
+  // Both tests, in float without fused multiply-add, against a plain loop; padding at infinity.
+  std::mt19937 rng(33);  // seed 33
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), s(0.0f, 0.5f);
+  const float origin[3] = {0.1f, 0.2f, -0.1f}, r2 = 0.5f, scale = 3.03f, margin = 0.05f;
+  std::vector<float> x, y, z, sigma;
+  std::vector<std::uint32_t> slots, expected;
+  for (std::uint32_t j = 0; j < 301; ++j) {
+    x.push_back(origin[0] + u(rng));
+    y.push_back(origin[1] + u(rng));
+    z.push_back(origin[2] + 0.3f * u(rng));
+    sigma.push_back(s(rng));
+    slots.push_back(7 * j + 1);
+    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+    const float d2 = dx * dx + dy * dy;
+    const float reach = scale * sigma[j] + margin;
+    if (d2 + dz * dz < r2 && d2 + dz * dz < reach * reach) expected.push_back(slots[j]);
+  }
+  while (x.size() % 8 != 0) {
+    x.push_back(std::numeric_limits<float>::infinity());
+    y.push_back(std::numeric_limits<float>::infinity());
+    z.push_back(std::numeric_limits<float>::infinity());
+    sigma.push_back(1);
+    slots.push_back(3);
+  }
+  std::vector<std::uint32_t> out(x.size());
+  out.resize(select_within_reach(x.data(), y.data(), z.data(), sigma.data(), slots.data(), x.size(),
+                                 origin, r2, scale, margin, out.data()));
+  EXPECT_EQ(out, expected);
+  EXPECT_GT(expected.size(), 20u);
+  EXPECT_LT(expected.size(), 250u);
 }
 
 TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {

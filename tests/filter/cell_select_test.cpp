@@ -73,6 +73,36 @@ TEST(CellSelectTest, QueriesOffTheGridAndEmptyRadii) {
   EXPECT_GT(sel.select(a, key, q, 0.05f), 0u);
 }
 
+TEST(CellSelectTest, WithinReachKeepsTheSlotsWithinBothRadii) {
+  // The oracle: the index's own radius query, filtered by the reach in the same float rounding.
+  const std::vector<Eigen::Vector3f> pts = surface_points(20000, 8);
+  const float cell = 0.05f, scale = 3.03f, margin = 0.004f;
+  NeighborIndex a(pts, cell);
+  std::vector<float> sigma(a.size());
+  for (std::size_t t = 0; t < a.size(); ++t) sigma[t] = 0.003f + 0.01f * static_cast<float>(t % 7);
+  const std::uint64_t key = new_cell_cache_key();
+  CellSelect sel;
+  for (std::size_t s = 0; s < a.size(); s += 53) {
+    const Eigen::Vector3f q = a.slot_point(s);
+    for (const float r : {0.5f * cell, 0.95f * cell}) {
+      std::vector<std::uint32_t> want;
+      a.for_each_slot_within(q, r, [&](std::uint32_t t, float) {
+        const Eigen::Vector3f d = a.slot_point(t) - q;
+        const float dx = d.x(), dy = d.y(), dz = d.z(), d2 = dx * dx + dy * dy + dz * dz;
+        const float reach = scale * sigma[t] + margin;
+        if (d2 < reach * reach) want.push_back(t);
+      });
+      const std::size_t n = sel.select_within_reach(
+          a, key, q, r, [&](std::uint32_t t) { return sigma[t]; }, scale, margin);
+      ASSERT_NE(n, CellSelect::kNotGrid);
+      EXPECT_EQ(std::vector<std::uint32_t>(sel.hits(), sel.hits() + n), want) << "slot " << s;
+      // A plain select on the same cached cells afterwards: the full radius query.
+      const std::size_t m = sel.select(a, key, q, r);
+      EXPECT_EQ(m, oracle(a, q, r).size());
+    }
+  }
+}
+
 TEST(CellSelectTest, CrowdedNeighbourhoodsAreLeftToTheIndex) {
   // 70,000 points in one cell: more than a cache entry holds.
   std::vector<Eigen::Vector3f> pts = surface_points(70000, 6);
