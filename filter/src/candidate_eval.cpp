@@ -6,7 +6,7 @@
 #include <cstring>
 #include <limits>
 
-#include "left_pack.h"
+#include "avx2_select.h"
 
 // The 8-wide helpers below return vectors by value; they are always inlined into functions
 // compiled for AVX2 (see step_avx2), so the ABI note GCC gives for them does not apply.
@@ -285,19 +285,11 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
                oz = _mm256_set1_ps(origin[2]), rr = _mm256_set1_ps(r2);
   std::size_t m = 0;
   for (std::size_t j = 0; j < n; j += 8) {
-    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), ox);
-    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), oy);
-    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), oz);
-    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-                                    _mm256_mul_ps(dz, dz));
+    const __m256 d2 = squared_distances8(x + j, y + j, z + j, ox, oy, oz);
     const unsigned mask =
         static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ)));
-    // Left-pack the selected lanes' slots: all 8 are stored at m <= j (so within n), the count
-    // advances by the selected.
-    const __m256i s = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots + j));
-    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lane[mask]));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + m), _mm256_permutevar8x32_epi32(s, perm));
-    m += static_cast<std::size_t>(__builtin_popcount(mask));
+    // All 8 are stored at m <= j (so within n), the count advances by the selected.
+    m += store_left_packed(out + m, slots + j, mask);
   }
   return m;
 }
@@ -312,19 +304,11 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   const __m256 sc = _mm256_set1_ps(scale), mg = _mm256_set1_ps(margin);
   std::size_t m = 0;
   for (std::size_t j = 0; j < n; j += 8) {
-    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), ox);
-    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), oy);
-    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), oz);
-    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-                                    _mm256_mul_ps(dz, dz));
+    const __m256 d2 = squared_distances8(x + j, y + j, z + j, ox, oy, oz);
     const __m256 reach = _mm256_add_ps(_mm256_mul_ps(sc, _mm256_loadu_ps(sigma + j)), mg);
     const __m256 in = _mm256_and_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ),
                                     _mm256_cmp_ps(d2, _mm256_mul_ps(reach, reach), _CMP_LT_OQ));
-    const unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(in));
-    const __m256i s = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots + j));
-    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lane[mask]));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + m), _mm256_permutevar8x32_epi32(s, perm));
-    m += static_cast<std::size_t>(__builtin_popcount(mask));
+    m += store_left_packed(out + m, slots + j, static_cast<unsigned>(_mm256_movemask_ps(in)));
   }
   return m;
 }

@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <limits>
 
-#include "left_pack.h"
+#include "avx2_select.h"
 
 namespace scanclean::detail {
 namespace {
@@ -100,20 +100,13 @@ void band_scalar(const float* x, const float* y, const float* z, std::size_t b, 
   const __m256 lo = _mm256_set1_ps(lo2), hi = _mm256_set1_ps(hi2);
   std::size_t j = 0, count = 0;
   for (; j + 8 <= n; j += 8) {
-    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), qx);
-    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), qy);
-    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), qz);
-    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-                                    _mm256_mul_ps(dz, dz));
+    const __m256 d2 = squared_distances8(x + j, y + j, z + j, qx, qy, qz);
     const __m256 under = _mm256_cmp_ps(d2, lo, _CMP_LT_OQ);
     const __m256 in = _mm256_andnot_ps(under, _mm256_cmp_ps(d2, hi, _CMP_LT_OQ));
     count += static_cast<std::size_t>(
         __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under))));
-    const unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(in));
-    // Left-pack the band's lanes; all 8 are stored, m advances by the selected.
-    const __m256i perm = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lane[mask]));
-    _mm256_storeu_ps(band + m, _mm256_permutevar8x32_ps(d2, perm));
-    m += static_cast<std::size_t>(__builtin_popcount(mask));
+    // The band's lanes, left-packed; all 8 are stored, m advances by the selected.
+    m += store_left_packed(band + m, d2, static_cast<unsigned>(_mm256_movemask_ps(in)));
   }
   below += count;
   band_scalar(x, y, z, j, n, q, lo2, hi2, below, band, m);
@@ -143,11 +136,7 @@ void within_scalar(const float* x, const float* y, const float* z, const std::ui
   __m256i sum = _mm256_setzero_si256();
   std::size_t j = 0, within = 0, below = 0;
   for (; j + 8 <= n; j += 8) {
-    const __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), qx);
-    const __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), qy);
-    const __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), qz);
-    const __m256 d2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-                                    _mm256_mul_ps(dz, dz));
+    const __m256 d2 = squared_distances8(x + j, y + j, z + j, qx, qy, qz);
     const __m256 in = _mm256_cmp_ps(d2, rr, _CMP_LT_OQ);
     const __m256i c = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt + j));
     sum = _mm256_add_epi32(sum, _mm256_and_si256(c, _mm256_castps_si256(in)));

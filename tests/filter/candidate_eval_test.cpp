@@ -36,6 +36,21 @@ std::vector<KernelRecord> random_kernels(int n, std::uint32_t seed) {
   return k;
 }
 
+// Pads the points with +inf coordinates (never selected) to a multiple of 8, as the selections
+// ask; slots (and sigma, when given) get `slot` (and `s`) there.
+void pad_at_infinity(std::vector<float>& x, std::vector<float>& y, std::vector<float>& z,
+                     std::vector<std::uint32_t>& slots, std::uint32_t slot,
+                     std::vector<float>* sigma = nullptr, float s = 0) {
+  const float inf = std::numeric_limits<float>::infinity();
+  while (x.size() % 8 != 0) {
+    x.push_back(inf);
+    y.push_back(inf);
+    z.push_back(inf);
+    slots.push_back(slot);
+    if (sigma) sigma->push_back(s);
+  }
+}
+
 struct Reference {
   std::vector<double> e, d;
   double e_min = std::numeric_limits<double>::infinity();
@@ -179,12 +194,7 @@ TEST(CandidateEvalTest, SelectWithinEqualsTheScalarDistanceTest) {
     const float d2 = dx * dx + dy * dy;
     if (d2 + dz * dz < r2) expected.push_back(slots[j]);
   }
-  while (x.size() % 8 != 0) {
-    x.push_back(std::numeric_limits<float>::infinity());
-    y.push_back(std::numeric_limits<float>::infinity());
-    z.push_back(std::numeric_limits<float>::infinity());
-    slots.push_back(7);
-  }
+  pad_at_infinity(x, y, z, slots, 7);
   std::vector<std::uint32_t> out(x.size());
   const std::size_t n =
       select_within(x.data(), y.data(), z.data(), slots.data(), x.size(), origin, r2, out.data());
@@ -217,13 +227,7 @@ TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
       sigma[j] = k[j].sigma();
       all[j] = static_cast<std::uint32_t>(j);
     }
-    while (x.size() % 8 != 0) {
-      x.push_back(std::numeric_limits<float>::infinity());
-      y.push_back(std::numeric_limits<float>::infinity());
-      z.push_back(std::numeric_limits<float>::infinity());
-      sigma.push_back(0);
-      all.push_back(0);
-    }
+    pad_at_infinity(x, y, z, all, 0, &sigma, 0);
     const std::size_t m =
         select_within_reach(x.data(), y.data(), z.data(), sigma.data(), all.data(), x.size(),
                             origin, 1.0f, scale, margin, kept.data());
@@ -275,13 +279,7 @@ TEST(CandidateEvalTest, SelectWithinReachEqualsTheScalarTests) {
     const float reach = scale * sigma[j] + margin;
     if (d2 + dz * dz < r2 && d2 + dz * dz < reach * reach) expected.push_back(slots[j]);
   }
-  while (x.size() % 8 != 0) {
-    x.push_back(std::numeric_limits<float>::infinity());
-    y.push_back(std::numeric_limits<float>::infinity());
-    z.push_back(std::numeric_limits<float>::infinity());
-    sigma.push_back(1);
-    slots.push_back(3);
-  }
+  pad_at_infinity(x, y, z, slots, 3, &sigma, 1);
   std::vector<std::uint32_t> out(x.size());
   out.resize(select_within_reach(x.data(), y.data(), z.data(), sigma.data(), slots.data(), x.size(),
                                  origin, r2, scale, margin, out.data()));
