@@ -158,6 +158,49 @@ void within_scalar(const float* x, const float* y, const float* z, const std::ui
   within_scalar(x, y, z, cnt, lik, j, n, q, r2, lik_max, out);
 }
 
+void near_box_scalar(const float* x, const float* y, const float* z, std::size_t b, std::size_t n,
+                     const float lo[3], const float hi[3], float r2, float* ox, float* oy,
+                     float* oz, std::size_t& m) {
+  for (std::size_t j = b; j < n; ++j) {
+    const float ex = std::max(std::max(lo[0] - x[j], x[j] - hi[0]), 0.0f);
+    const float ey = std::max(std::max(lo[1] - y[j], y[j] - hi[1]), 0.0f);
+    const float ez = std::max(std::max(lo[2] - z[j], z[j] - hi[2]), 0.0f);
+    ox[m] = x[j];
+    oy[m] = y[j];
+    oz[m] = z[j];
+    m += ex * ex + ey * ey + ez * ez < r2 ? 1 : 0;
+  }
+}
+
+// AVX2 without FMA, so the squared gaps round as in near_box_scalar.
+[[gnu::target("avx2")]] void near_box_avx2(const float* x, const float* y, const float* z,
+                                           std::size_t n, const float lo[3], const float hi[3],
+                                           float r2, float* ox, float* oy, float* oz,
+                                           std::size_t& m) {
+  const __m256 lx = _mm256_set1_ps(lo[0]), ly = _mm256_set1_ps(lo[1]), lz = _mm256_set1_ps(lo[2]);
+  const __m256 hx = _mm256_set1_ps(hi[0]), hy = _mm256_set1_ps(hi[1]), hz = _mm256_set1_ps(hi[2]);
+  const __m256 rr = _mm256_set1_ps(r2), zero = _mm256_setzero_ps();
+  std::size_t j = 0;
+  for (; j + 8 <= n; j += 8) {
+    const __m256 px = _mm256_loadu_ps(x + j), py = _mm256_loadu_ps(y + j),
+                 pz = _mm256_loadu_ps(z + j);
+    const __m256 ex =
+        _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(lx, px), _mm256_sub_ps(px, hx)), zero);
+    const __m256 ey =
+        _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(ly, py), _mm256_sub_ps(py, hy)), zero);
+    const __m256 ez =
+        _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(lz, pz), _mm256_sub_ps(pz, hz)), zero);
+    const __m256 g2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey)),
+                                    _mm256_mul_ps(ez, ez));
+    const unsigned mask =
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(g2, rr, _CMP_LT_OQ)));
+    store_left_packed(ox + m, px, mask);
+    store_left_packed(oy + m, py, mask);
+    m += store_left_packed(oz + m, pz, mask);
+  }
+  near_box_scalar(x, y, z, j, n, lo, hi, r2, ox, oy, oz, m);
+}
+
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2");
   return yes;
@@ -172,6 +215,15 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
     band_avx2(x, y, z, n, q, lo2, hi2, below, band, m);
   else
     band_scalar(x, y, z, 0, n, q, lo2, hi2, below, band, m);
+}
+
+void select_near_box(const float* x, const float* y, const float* z, std::size_t n,
+                     const float lo[3], const float hi[3], float r2, float* ox, float* oy,
+                     float* oz, std::size_t& m) {
+  if (have_avx2())
+    near_box_avx2(x, y, z, n, lo, hi, r2, ox, oy, oz, m);
+  else
+    near_box_scalar(x, y, z, 0, n, lo, hi, r2, ox, oy, oz, m);
 }
 
 bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {

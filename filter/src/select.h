@@ -37,6 +37,14 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
                           const float q[3], float lo2, float hi2, std::size_t& below, float* band,
                           std::size_t& m);
 
+//! Appends to (ox, oy, oz)[m, ...) the points p_j = (x[j], y[j], z[j]), j < n, whose squared
+//! distance to the box [lo, hi] (the sum of the squared gaps per axis, each rounded in float) is
+//! below r2, in order; m grows by their number. The outputs need room for m + n + 8 values. AVX2
+//! or scalar, the same results.
+void select_near_box(const float* x, const float* y, const float* z, std::size_t n,
+                     const float lo[3], const float hi[3], float r2, float* ox, float* oy,
+                     float* oz, std::size_t& m);
+
 //! The largest float v with ratio x double(v) <= l (in double), so that for every float v that
 //! test holds exactly when v <= bound (it is monotone in v for ratio > 0). False, leaving bound
 //! as it was, when ratio is not positive, l is negative or not finite, or l / ratio lies past

@@ -1,6 +1,6 @@
 // kth_smallest_below (filter/src/select.h) against std::nth_element, the oracle: random values,
-// ties, values outside the stated range; the band and within counts against plain loops; the
-// float bound of a double test against the test itself.
+// ties, values outside the stated range; the band, within and near-box counts against plain
+// loops; the float bound of a double test against the test itself.
 
 #include "../../filter/src/select.h"
 
@@ -186,6 +186,59 @@ TEST(SelectTest, CountWithinMatchesAPlainLoop) {
     EXPECT_EQ(no_lik.sum, sum);
     EXPECT_EQ(no_lik.n, within);
     EXPECT_EQ(no_lik.at_or_below, 0u);
+  }
+}
+
+TEST(SelectTest, NearBoxKeepsEveryPointWithinReachOfAQueryInTheBox) {
+  // The oracle: a plain loop over the points with the same float rounding of the gaps; and the
+  // invariant the adaptive scale relies on: a point whose squared distance (rounded as
+  // count_below_and_band rounds it) to a query inside the box is below r2 is always kept.
+  std::mt19937 rng(29);  // seed 29
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f), in(0.0f, 1.0f);
+  for (std::size_t n : {0, 3, 8, 13, 64, 301}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      std::vector<float> x(n), y(n), z(n);
+      for (std::size_t j = 0; j < n; ++j) {
+        x[j] = u(rng);
+        y[j] = u(rng);
+        z[j] = u(rng);
+      }
+      const float lo[3] = {-0.2f, -0.1f, 0.0f}, hi[3] = {0.1f, 0.25f, 0.05f};
+      const float r2 = 0.3f * 0.3f;
+      std::vector<float> ox(2 + n + 8), oy(2 + n + 8), oz(2 + n + 8);
+      std::size_t m = 2;  // appends after what is there
+      select_near_box(x.data(), y.data(), z.data(), n, lo, hi, r2, ox.data(), oy.data(), oz.data(),
+                      m);
+      std::vector<float> wx, wy, wz;
+      for (std::size_t j = 0; j < n; ++j) {
+        const float ex = std::max(std::max(lo[0] - x[j], x[j] - hi[0]), 0.0f);
+        const float ey = std::max(std::max(lo[1] - y[j], y[j] - hi[1]), 0.0f);
+        const float ez = std::max(std::max(lo[2] - z[j], z[j] - hi[2]), 0.0f);
+        if (ex * ex + ey * ey + ez * ez < r2) {
+          wx.push_back(x[j]);
+          wy.push_back(y[j]);
+          wz.push_back(z[j]);
+        }
+      }
+      ASSERT_EQ(m, 2 + wx.size()) << "n " << n;
+      for (std::size_t k = 0; k < wx.size(); ++k) {
+        ASSERT_EQ(ox[2 + k], wx[k]);
+        ASSERT_EQ(oy[2 + k], wy[k]);
+        ASSERT_EQ(oz[2 + k], wz[k]);
+      }
+      // Queries inside the box: every point the band count would see below r2 is kept.
+      for (int qi = 0; qi < 8; ++qi) {
+        const float q[3] = {lo[0] + in(rng) * (hi[0] - lo[0]), lo[1] + in(rng) * (hi[1] - lo[1]),
+                            lo[2] + in(rng) * (hi[2] - lo[2])};
+        std::size_t below_all = 0, below_kept = 0, m_all = 0, m_kept = 0;
+        std::vector<float> band(n + m + 8);
+        count_below_and_band(x.data(), y.data(), z.data(), n, q, r2, r2, below_all, band.data(),
+                             m_all);
+        count_below_and_band(ox.data() + 2, oy.data() + 2, oz.data() + 2, m - 2, q, r2, r2,
+                             below_kept, band.data(), m_kept);
+        EXPECT_EQ(below_kept, below_all) << "n " << n << " query " << qi;
+      }
+    }
   }
 }
 
