@@ -3,8 +3,19 @@
 #include <atomic>
 
 #include "candidate_eval.h"
+#include "select.h"
 
 namespace scanclean::detail {
+namespace {
+
+// A part holds the points within this factor of the radius of the query that made it; a later
+// query of a larger radius makes it again.
+constexpr float kPartReach = 1.15f;
+// Parts only for queries whose part reach is at most this many cells.
+constexpr float kMaxPartReach = 0.95f;
+constexpr std::size_t kMaxPartPoints = std::size_t{1} << 14;
+
+}  // namespace
 
 std::uint64_t new_cell_cache_key() {
   static std::atomic<std::uint64_t> next{1};
@@ -28,51 +39,113 @@ CellSelect::Entry* CellSelect::entry(const NeighborIndex& index, std::uint64_t k
     Entry& e = *found;
     e.key = key;
     e.cell = c;
-    e.x.clear();
-    e.y.clear();
-    e.z.clear();
-    e.slot.clear();
+    // The arrays only grow (no clearing): n says how much of them is the entry.
+    e.n = (total + 7) / 8 * 8;
+    if (e.x.size() < e.n) {
+      e.x.resize(e.n);
+      e.y.resize(e.n);
+      e.z.resize(e.n);
+      e.slot.resize(e.n);
+    }
     e.sigma.clear();
+    std::size_t k = 0;
     index.for_each_adjacent_run(static_cast<std::size_t>(c),
                                 [&](std::uint32_t b, std::uint32_t end) {
-                                  for (std::uint32_t s = b; s < end; ++s) {
+                                  for (std::uint32_t s = b; s < end; ++s, ++k) {
                                     const Eigen::Vector3f& p = index.slot_point(s);
-                                    e.x.push_back(p.x());
-                                    e.y.push_back(p.y());
-                                    e.z.push_back(p.z());
-                                    e.slot.push_back(s);
+                                    e.x[k] = p.x();
+                                    e.y[k] = p.y();
+                                    e.z[k] = p.z();
+                                    e.slot[k] = s;
                                   }
                                 });
     const float inf = std::numeric_limits<float>::infinity();
-    while (e.x.size() % 8 != 0) {
-      e.x.push_back(inf);
-      e.y.push_back(inf);
-      e.z.push_back(inf);
-      e.slot.push_back(0);
+    for (; k < e.n; ++k) {
+      e.x[k] = e.y[k] = e.z[k] = inf;
+      e.slot[k] = 0;
     }
   }
   return found;
 }
 
+const CellSelect::Entry& CellSelect::part(const NeighborIndex& index, std::uint64_t key,
+                                          std::int64_t c, const Entry& e, const Eigen::Vector3f& q,
+                                          float r) {
+  // A part keeps the points within reach of an octant's box, half a cell wide, out of the 27
+  // cells: with reach near a cell it keeps most of them, and making it costs more than it
+  // saves (the 1M-point sphere at defaults, where the gathers' radius is the kernel grid's
+  // cell).
+  const float reach = std::max(std::min(r * kPartReach, index.max_adjacent_radius()), r);
+  if (reach > kMaxPartReach * static_cast<float>(index.cell())) return e;
+  // Memory: parts of at most kMaxPartPoints points, at most kParts x kMaxPartPoints x 20 bytes
+  // a thread.
+  if (e.n > kMaxPartPoints) return e;
+  Eigen::Vector3f lo, hi;
+  const int octant = index.cell_octant(q, lo, hi);
+  if (!((q.array() >= lo.array()).all() && (q.array() <= hi.array()).all())) return e;
+  const bool sigma = !e.sigma.empty();
+  Entry* found = nullptr;
+  for (Entry& p : parts_)
+    if (p.cell == c && p.octant == octant && p.key == key) found = &p;
+  if (found && found->reach >= r && found->has_sigma == sigma) return *found;
+  if (!found) {
+    found = &parts_[next_part_];
+    next_part_ = (next_part_ + 1) % kParts;
+  }
+  Entry& p = *found;
+  p.key = key;
+  p.cell = c;
+  p.octant = octant;
+  p.has_sigma = sigma;
+  p.reach = reach;
+  // select_near_box keeps every point within reach of a query inside the box; 0.1 % more to
+  // spare.
+  const float w2 = p.reach * p.reach * 1.001f;
+  const float blo[3] = {lo.x(), lo.y(), lo.z()}, bhi[3] = {hi.x(), hi.y(), hi.z()};
+  // The arrays only grow (no clearing): n says how much of them is the part.
+  const std::size_t cap = e.n + 8;
+  if (p.x.size() < cap) {
+    p.x.resize(cap);
+    p.y.resize(cap);
+    p.z.resize(cap);
+    p.slot.resize(cap);
+  }
+  if (sigma && p.sigma.size() < cap) p.sigma.resize(cap);
+  std::size_t m = 0;
+  select_near_box(
+      e.x.data(), e.y.data(), e.z.data(), e.slot.data(), sigma ? e.sigma.data() : nullptr, e.n, blo,
+      bhi, w2,
+      {p.x.data(), p.y.data(), p.z.data(), p.slot.data(), sigma ? p.sigma.data() : nullptr}, m);
+  // Padded as the entries are: +inf coordinates.
+  const float inf = std::numeric_limits<float>::infinity();
+  p.n = (m + 7) / 8 * 8;
+  for (std::size_t k = m; k < p.n; ++k) {
+    p.x[k] = p.y[k] = p.z[k] = inf;
+    p.slot[k] = 0;
+    if (sigma) p.sigma[k] = 0;
+  }
+  return p;
+}
+
 std::size_t CellSelect::select(const NeighborIndex& index, std::uint64_t key,
-                               const Eigen::Vector3f& q, float r) {
+                               const Eigen::Vector3f& q, float r, bool parts) {
   if (!(r > 0)) return 0;  // as NeighborIndex::for_each_slot_within
   const std::int64_t c = index.adjacent_cell(q, r);
-  const Entry* e = c < 0 ? nullptr : entry(index, key, c);
-  if (!e) return kNotGrid;
-  if (hit_.size() < e->x.size()) hit_.resize(e->x.size());
+  const Entry* full = c < 0 ? nullptr : entry(index, key, c);
+  if (!full) return kNotGrid;
+  const Entry& e = parts ? part(index, key, c, *full, q, r) : *full;
+  if (hit_.size() < e.n) hit_.resize(e.n);
   const float origin[3] = {q.x(), q.y(), q.z()};
-  return select_within(e->x.data(), e->y.data(), e->z.data(), e->slot.data(), e->x.size(), origin,
-                       r * r, hit_.data());
+  return select_within(e.x.data(), e.y.data(), e.z.data(), e.slot.data(), e.n, origin, r * r,
+                       hit_.data());
 }
 
 std::size_t CellSelect::select_reach_in(const Entry& e, const Eigen::Vector3f& q, float r,
                                         float scale, float margin) {
-  if (hit_.size() < e.x.size()) hit_.resize(e.x.size());
+  if (hit_.size() < e.n) hit_.resize(e.n);
   const float origin[3] = {q.x(), q.y(), q.z()};
   return detail::select_within_reach(e.x.data(), e.y.data(), e.z.data(), e.sigma.data(),
-                                     e.slot.data(), e.x.size(), origin, r * r, scale, margin,
-                                     hit_.data());
+                                     e.slot.data(), e.n, origin, r * r, scale, margin, hit_.data());
 }
 
 CellSelect& thread_cell_select() {

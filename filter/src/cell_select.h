@@ -29,8 +29,12 @@ class CellSelect {
   //! (selecting nothing) when the query does not take the index's grid fast path or its 27
   //! cells hold more than 65,536 points (use the index's own queries then). `key` from
   //! new_cell_cache_key() for this index.
+  //! With `parts`, the selection runs over the part of the cell's neighbourhood the query needs
+  //! (the points near the octant of the cell that holds q, see part()): the same slots, fewer
+  //! distances, but a part costs a pass over the neighbourhood to make, which pays only when
+  //! several queries share it.
   std::size_t select(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
-                     float r);
+                     float r, bool parts = true);
   //! As select, keeping only the slots s that also lie within scale sigma(s) + margin of q
   //! (candidate_eval.h select_within_reach). sigma(s) is read once per cached cell neighbourhood
   //! (the same function for every call with this key).
@@ -42,11 +46,11 @@ class CellSelect {
     const std::int64_t c = index.adjacent_cell(q, r);
     Entry* e = c < 0 ? nullptr : entry(index, key, c);
     if (!e) return kNotGrid;
-    if (e->sigma.size() != e->slot.size()) {
-      e->sigma.resize(e->slot.size());
-      for (std::size_t k = 0; k < e->slot.size(); ++k) e->sigma[k] = sigma(e->slot[k]);
+    if (e->sigma.size() != e->n) {
+      e->sigma.resize(e->n);
+      for (std::size_t k = 0; k < e->n; ++k) e->sigma[k] = sigma(e->slot[k]);
     }
-    return select_reach_in(*e, q, r, scale, margin);
+    return select_reach_in(part(index, key, c, *e, q, r), q, r, scale, margin);
   }
   //! The slots of the last select (valid until the next call).
   const std::uint32_t* hits() const { return hit_.data(); }
@@ -56,8 +60,8 @@ class CellSelect {
   //! use this CellSelect.
   template <class F>
   void for_each_slot_within(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
-                            float r, F&& f) {
-    const std::size_t n = select(index, key, q, r);
+                            float r, F&& f, bool parts = true) {
+    const std::size_t n = select(index, key, q, r, parts);
     if (n == kNotGrid) {
       index.for_each_slot_within(q, r, [&](std::uint32_t s, float) { f(s); });
       return;
@@ -69,12 +73,24 @@ class CellSelect {
   struct Entry {
     std::uint64_t key = 0;
     std::int64_t cell = -1;
-    std::vector<float> x, y, z;  // padded with +inf to a multiple of 8
+    std::vector<float> x, y, z;  // padded with +inf to a multiple of 8 (first n)
     std::vector<std::uint32_t> slot;
     std::vector<float> sigma;  // per slot, when select_within_reach filled it (else empty)
+    std::size_t n = 0;         // the entry's points, padded (the arrays may be longer)
+    // A part (the parts_ below): the octant of `cell`, its box, and the radius it serves.
+    int octant = -1;
+    Eigen::Vector3f lo = Eigen::Vector3f::Zero(), hi = Eigen::Vector3f::Zero();
+    float reach = 0;
+    bool has_sigma = false;
   };
   // The cached neighbourhood of cell c, copied in if absent; null when too crowded.
   Entry* entry(const NeighborIndex& index, std::uint64_t key, std::int64_t c);
+  // The part of e (cell c's neighbourhood) that a query at q of radius r needs: the points
+  // within kPartReach r of the octant of c that holds q, in e's order, so that a selection from
+  // it gives the same slots in the same order. Cached (parts_); e itself when q lies outside its
+  // octant's box by rounding.
+  const Entry& part(const NeighborIndex& index, std::uint64_t key, std::int64_t c, const Entry& e,
+                    const Eigen::Vector3f& q, float r);
   std::size_t select_reach_in(const Entry& e, const Eigen::Vector3f& q, float r, float scale,
                               float margin);
   // One cell of a point grid spans several cells of a coarser grid: keep the last few.
@@ -82,6 +98,10 @@ class CellSelect {
   static constexpr std::size_t kMaxPoints = std::size_t{1} << 16;  // per entry
   Entry entry_[kEntries];
   std::size_t next_ = 0;  // round-robin replacement
+  // The parts of the entries above: up to eight octants of each.
+  static constexpr std::size_t kParts = 4 * kEntries;
+  Entry parts_[kParts];
+  std::size_t next_part_ = 0;
   std::vector<std::uint32_t> hit_;
 };
 

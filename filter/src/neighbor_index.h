@@ -50,6 +50,11 @@ class NeighborIndex {
   //! The occupied cell whose adjacent runs (for_each_adjacent_run) for_each_cell_run(q, r, f)
   //! passes to f, in that order, when it takes its fast path; -1 when it does not.
   std::int64_t adjacent_cell(const Eigen::Vector3f& q, float r) const;
+  //! The octant of q's grid cell that holds q (0-7: bit a set for the upper half along axis a),
+  //! and its box, grown by 1e-4 cells on every side. The box is the same for every q of the
+  //! octant (a function of the octant only); rounding may leave a q at an octant's edge just
+  //! outside it, which callers check. Only meaningful for a q inside the grid (adjacent_cell()).
+  int cell_octant(const Eigen::Vector3f& q, Eigen::Vector3f& box_lo, Eigen::Vector3f& box_hi) const;
   //! Calls f(begin_slot, end_slot) for every occupied grid cell that may hold points within r
   //! of q (a superset of the ball; callers filter by distance). Returns false, calling nothing,
   //! when r is too large for the grid (use for_each_slot_within then).
@@ -202,6 +207,21 @@ inline std::int64_t NeighborIndex::adjacent_cell(const Eigen::Vector3f& q, float
     c3[a] = inside ? static_cast<std::int32_t>(c) : 0;
   }
   return inside ? find_cell(detail::cell_key(c3[0], c3[1], c3[2])) : -1;
+}
+
+inline int NeighborIndex::cell_octant(const Eigen::Vector3f& q, Eigen::Vector3f& box_lo,
+                                      Eigen::Vector3f& box_hi) const {
+  int octant = 0;
+  const float cell = static_cast<float>(cell_), half = 0.5f * cell, grow = 1e-4f * cell;
+  for (int a = 0; a < 3; ++a) {
+    const float t = (q[a] - lo_[a]) * inv_cell_, c = std::floor(t);
+    const bool upper = t - c >= 0.5f;
+    octant |= upper ? 1 << a : 0;
+    const float base = lo_[a] + c * cell + (upper ? half : 0.0f);
+    box_lo[a] = base - grow;
+    box_hi[a] = base + half + grow;
+  }
+  return octant;
 }
 
 template <class F>

@@ -300,8 +300,8 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
             const float g2 = (run.lo - ghi).cwiseMax(glo - run.hi).cwiseMax(0.0f).squaredNorm();
             if (g2 < w2)
               detail::select_near_box(bx.data() + run.b, by.data() + run.b, bz.data() + run.b,
-                                      run.e - run.b, glo3, ghi3, w2, cx.data(), cy.data(),
-                                      cz.data(), nc);
+                                      nullptr, nullptr, run.e - run.b, glo3, ghi3, w2,
+                                      {cx.data(), cy.data(), cz.data()}, nc);
           }
           for (std::uint32_t s = cb + 1; s < ce; ++s)
             if (octant[s - cb] == g) kth_at(s, guess, cx.data(), cy.data(), cz.data(), nc, within);

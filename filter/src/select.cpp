@@ -158,25 +158,33 @@ void within_scalar(const float* x, const float* y, const float* z, const std::ui
   within_scalar(x, y, z, cnt, lik, j, n, q, r2, lik_max, out);
 }
 
-void near_box_scalar(const float* x, const float* y, const float* z, std::size_t b, std::size_t n,
-                     const float lo[3], const float hi[3], float r2, float* ox, float* oy,
-                     float* oz, std::size_t& m) {
+// The squared distance from p to the box [lo, hi]: the gaps per axis, rounded in float.
+inline float box_gap2(float x, float y, float z, const float lo[3], const float hi[3]) {
+  const float ex = std::max(std::max(lo[0] - x, x - hi[0]), 0.0f);
+  const float ey = std::max(std::max(lo[1] - y, y - hi[1]), 0.0f);
+  const float ez = std::max(std::max(lo[2] - z, z - hi[2]), 0.0f);
+  return ex * ex + ey * ey + ez * ez;
+}
+
+// The kept points' coordinates, and their values of `slot` and `extra` when not null.
+void near_box_scalar(const float* x, const float* y, const float* z, const std::uint32_t* slot,
+                     const float* extra, std::size_t b, std::size_t n, const float lo[3],
+                     const float hi[3], float r2, NearBoxOut& out, std::size_t& m) {
   for (std::size_t j = b; j < n; ++j) {
-    const float ex = std::max(std::max(lo[0] - x[j], x[j] - hi[0]), 0.0f);
-    const float ey = std::max(std::max(lo[1] - y[j], y[j] - hi[1]), 0.0f);
-    const float ez = std::max(std::max(lo[2] - z[j], z[j] - hi[2]), 0.0f);
-    ox[m] = x[j];
-    oy[m] = y[j];
-    oz[m] = z[j];
-    m += ex * ex + ey * ey + ez * ez < r2 ? 1 : 0;
+    out.x[m] = x[j];
+    out.y[m] = y[j];
+    out.z[m] = z[j];
+    if (slot) out.slot[m] = slot[j];
+    if (extra) out.extra[m] = extra[j];
+    m += box_gap2(x[j], y[j], z[j], lo, hi) < r2 ? 1 : 0;
   }
 }
 
 // AVX2 without FMA, so the squared gaps round as in near_box_scalar.
 [[gnu::target("avx2")]] void near_box_avx2(const float* x, const float* y, const float* z,
+                                           const std::uint32_t* slot, const float* extra,
                                            std::size_t n, const float lo[3], const float hi[3],
-                                           float r2, float* ox, float* oy, float* oz,
-                                           std::size_t& m) {
+                                           float r2, NearBoxOut& out, std::size_t& m) {
   const __m256 lx = _mm256_set1_ps(lo[0]), ly = _mm256_set1_ps(lo[1]), lz = _mm256_set1_ps(lo[2]);
   const __m256 hx = _mm256_set1_ps(hi[0]), hy = _mm256_set1_ps(hi[1]), hz = _mm256_set1_ps(hi[2]);
   const __m256 rr = _mm256_set1_ps(r2), zero = _mm256_setzero_ps();
@@ -194,11 +202,14 @@ void near_box_scalar(const float* x, const float* y, const float* z, std::size_t
                                     _mm256_mul_ps(ez, ez));
     const unsigned mask =
         static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(g2, rr, _CMP_LT_OQ)));
-    store_left_packed(ox + m, px, mask);
-    store_left_packed(oy + m, py, mask);
-    m += store_left_packed(oz + m, pz, mask);
+    if (mask == 0) continue;
+    if (slot) store_left_packed(out.slot + m, slot + j, mask);
+    if (extra) store_left_packed(out.extra + m, _mm256_loadu_ps(extra + j), mask);
+    store_left_packed(out.x + m, px, mask);
+    store_left_packed(out.y + m, py, mask);
+    m += store_left_packed(out.z + m, pz, mask);
   }
-  near_box_scalar(x, y, z, j, n, lo, hi, r2, ox, oy, oz, m);
+  near_box_scalar(x, y, z, slot, extra, j, n, lo, hi, r2, out, m);
 }
 
 bool have_avx2() {
@@ -217,13 +228,13 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
     band_scalar(x, y, z, 0, n, q, lo2, hi2, below, band, m);
 }
 
-void select_near_box(const float* x, const float* y, const float* z, std::size_t n,
-                     const float lo[3], const float hi[3], float r2, float* ox, float* oy,
-                     float* oz, std::size_t& m) {
+void select_near_box(const float* x, const float* y, const float* z, const std::uint32_t* slot,
+                     const float* extra, std::size_t n, const float lo[3], const float hi[3],
+                     float r2, NearBoxOut out, std::size_t& m) {
   if (have_avx2())
-    near_box_avx2(x, y, z, n, lo, hi, r2, ox, oy, oz, m);
+    near_box_avx2(x, y, z, slot, extra, n, lo, hi, r2, out, m);
   else
-    near_box_scalar(x, y, z, 0, n, lo, hi, r2, ox, oy, oz, m);
+    near_box_scalar(x, y, z, slot, extra, 0, n, lo, hi, r2, out, m);
 }
 
 bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {

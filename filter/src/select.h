@@ -37,13 +37,23 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
                           const float q[3], float lo2, float hi2, std::size_t& below, float* band,
                           std::size_t& m);
 
-//! Appends to (ox, oy, oz)[m, ...) the points p_j = (x[j], y[j], z[j]), j < n, whose squared
-//! distance to the box [lo, hi] (the sum of the squared gaps per axis, each rounded in float) is
-//! below r2, in order; m grows by their number. The outputs need room for m + n + 8 values. AVX2
-//! or scalar, the same results.
-void select_near_box(const float* x, const float* y, const float* z, std::size_t n,
-                     const float lo[3], const float hi[3], float r2, float* ox, float* oy,
-                     float* oz, std::size_t& m);
+//! Where select_near_box appends: coordinates, and the slot and extra values when the inputs
+//! have them. Each needs room for m + n + 8 values.
+struct NearBoxOut {
+  float *x = nullptr, *y = nullptr, *z = nullptr;
+  std::uint32_t* slot = nullptr;
+  float* extra = nullptr;
+};
+//! Appends to out[m, ...) the points p_j = (x[j], y[j], z[j]), j < n, whose squared distance to
+//! the box [lo, hi] (the sum of the squared gaps per axis, each rounded in float, without fused
+//! multiply-add) is below r2, in order, with slot[j] and extra[j] when those are not null; m
+//! grows by their number. A point's squared distance so rounded is at most its squared distance
+//! to any q inside the box as count_below_and_band and select_within round it (float rounding
+//! is monotone), so the points within r of such a q are all kept when r * r <= r2. AVX2 or
+//! scalar, the same results.
+void select_near_box(const float* x, const float* y, const float* z, const std::uint32_t* slot,
+                     const float* extra, std::size_t n, const float lo[3], const float hi[3],
+                     float r2, NearBoxOut out, std::size_t& m);
 
 //! The largest float v with ratio x double(v) <= l (in double), so that for every float v that
 //! test holds exactly when v <= bound (it is monotone in v for ratio > 0). False, leaving bound

@@ -1,12 +1,13 @@
 // The cached cell-neighbourhood radius queries (filter/src/cell_select.h) against the index's own
 // for_each_slot_within (the oracle): the same slots in the same order, on the fast path, on the
 // fallback (a radius larger than the grid answers), across several indexes sharing one thread's
-// cache, and for a query off the grid.
+// cache, for a query off the grid, and through the parts of the cached neighbourhoods.
 
 #include "../../filter/src/cell_select.h"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 namespace scanclean::detail {
@@ -101,6 +102,51 @@ TEST(CellSelectTest, WithinReachKeepsTheSlotsWithinBothRadii) {
       EXPECT_EQ(m, oracle(a, q, r).size());
     }
   }
+}
+
+TEST(CellSelectTest, PartsGiveTheSlotsOfTheWholeNeighbourhood) {
+  // Many queries per cell, as the filter makes them: consecutive points of the grid order, at
+  // their own positions and at positions on the octants' boundaries (halves of a cell, where
+  // rounding may put a query just outside its octant's box), with radii that grow and shrink
+  // (parts made again for a larger radius), plain and within-reach selections on the same key
+  // (parts made again with sigma). Oracle: the index's own query; and the same selection
+  // without parts.
+  const std::vector<Eigen::Vector3f> pts = surface_points(20000, 12);
+  const float cell = 0.05f, scale = 3.03f, margin = 0.004f;
+  NeighborIndex a(pts, cell);
+  std::vector<float> sigma(a.size());
+  for (std::size_t t = 0; t < a.size(); ++t) sigma[t] = 0.002f + 0.004f * static_cast<float>(t % 5);
+  const std::uint64_t key = new_cell_cache_key();
+  CellSelect sel, whole;
+  std::mt19937 rng(12);  // seed 12
+  std::uniform_real_distribution<float> radius(0.2f * cell, 0.99f * cell);
+  std::size_t queries = 0;
+  for (std::size_t s = 0; s < a.size(); s += 3) {
+    Eigen::Vector3f q = a.slot_point(s);
+    if (s % 7 == 0)  // onto the boundary between two octants along x
+      q.x() = (std::floor(q.x() / (0.5f * cell)) + 1.0f) * 0.5f * cell;
+    const float r = radius(rng);
+    const std::vector<std::uint32_t> want = oracle(a, q, r);
+    const std::size_t n = sel.select(a, key, q, r);
+    if (n == CellSelect::kNotGrid) continue;
+    ++queries;
+    ASSERT_EQ(std::vector<std::uint32_t>(sel.hits(), sel.hits() + n), want) << "slot " << s;
+    const std::size_t m = whole.select(a, key, q, r, false);
+    ASSERT_EQ(m, n);
+    if (s % 2 == 0) {
+      std::vector<std::uint32_t> reach_want;
+      for (const std::uint32_t t : want) {
+        const Eigen::Vector3f d = a.slot_point(t) - q;
+        const float dx = d.x(), dy = d.y(), dz = d.z(), d2 = dx * dx + dy * dy + dz * dz;
+        const float reach = scale * sigma[t] + margin;
+        if (d2 < reach * reach) reach_want.push_back(t);
+      }
+      const std::size_t k = sel.select_within_reach(
+          a, key, q, r, [&](std::uint32_t t) { return sigma[t]; }, scale, margin);
+      ASSERT_EQ(std::vector<std::uint32_t>(sel.hits(), sel.hits() + k), reach_want) << "slot " << s;
+    }
+  }
+  EXPECT_GT(queries, a.size() / 4);  // the grid answered most of them
 }
 
 TEST(CellSelectTest, CrowdedNeighbourhoodsAreLeftToTheIndex) {

@@ -145,5 +145,48 @@ TEST(NeighborIndexTest, AdjacentCountsAndTheirRanksOverThePoints) {
     EXPECT_EQ(index.value_at_point_rank(counts, rank), per_point[rank]) << "rank " << rank;
 }
 
+TEST(NeighborIndexTest, CellOctantsSplitTheCellsInEightBoxes) {
+  // Every point lies in its octant's box (up to the 1e-4 cells the box is grown by, which
+  // covers rounding here), the octant's bits say which half of the cell it is in along each
+  // axis, and the box is half a cell wide (plus the growth) and the same for every point of the
+  // octant.
+  const std::vector<Eigen::Vector3f> pts = mixed_points(21);
+  const double cell = 0.07;
+  NeighborIndex index(pts, cell);
+  std::vector<std::pair<std::pair<std::int64_t, int>, Eigen::Vector3f>> seen;
+  std::size_t inside = 0, checked = 0;
+  for (std::size_t s = 0; s < index.size(); ++s) {
+    const Eigen::Vector3f& q = index.slot_point(s);
+    const std::int64_t c = index.adjacent_cell(q, 0.5f * static_cast<float>(cell));
+    if (c < 0) continue;
+    ++checked;
+    Eigen::Vector3f lo, hi;
+    const int octant = index.cell_octant(q, lo, hi);
+    ASSERT_GE(octant, 0);
+    ASSERT_LT(octant, 8);
+    inside += (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() ? 1 : 0;
+    for (int a = 0; a < 3; ++a)
+      EXPECT_NEAR(hi[a] - lo[a], 0.5 * cell * (1 + 4e-4), 1e-5) << "slot " << s;
+    // The same box for every point of the same cell and octant.
+    bool found = false;
+    for (const auto& [k, box_lo] : seen)
+      if (k.first == c && k.second == octant) {
+        EXPECT_EQ(box_lo, lo) << "slot " << s;
+        found = true;
+      }
+    if (!found && seen.size() < 4000) seen.push_back({{c, octant}, lo});
+    // Points in opposite halves of a cell along an axis have that bit different.
+    const Eigen::Vector3f mid_lo = lo - Eigen::Vector3f::Constant(1e-4f * static_cast<float>(cell));
+    for (int a = 0; a < 3; ++a) {
+      const bool upper = (octant >> a) & 1;
+      const float cell_lo = upper ? mid_lo[a] - 0.5f * static_cast<float>(cell) : mid_lo[a];
+      EXPECT_GE(q[a], cell_lo - 1e-5f) << "slot " << s;
+      EXPECT_LE(q[a], cell_lo + static_cast<float>(cell) + 1e-5f) << "slot " << s;
+    }
+  }
+  EXPECT_EQ(inside, checked);
+  EXPECT_GT(checked, index.size() * 9 / 10);
+}
+
 }  // namespace
 }  // namespace scanclean

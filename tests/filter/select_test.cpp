@@ -207,8 +207,8 @@ TEST(SelectTest, NearBoxKeepsEveryPointWithinReachOfAQueryInTheBox) {
       const float r2 = 0.3f * 0.3f;
       std::vector<float> ox(2 + n + 8), oy(2 + n + 8), oz(2 + n + 8);
       std::size_t m = 2;  // appends after what is there
-      select_near_box(x.data(), y.data(), z.data(), n, lo, hi, r2, ox.data(), oy.data(), oz.data(),
-                      m);
+      select_near_box(x.data(), y.data(), z.data(), nullptr, nullptr, n, lo, hi, r2,
+                      {ox.data(), oy.data(), oz.data()}, m);
       std::vector<float> wx, wy, wz;
       for (std::size_t j = 0; j < n; ++j) {
         const float ex = std::max(std::max(lo[0] - x[j], x[j] - hi[0]), 0.0f);
