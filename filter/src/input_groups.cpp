@@ -1,13 +1,12 @@
 #include "input_groups.h"
 
-#include <tbb/parallel_sort.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <numeric>
 
 #include "parallel.h"
+#include "radix_sort.h"
 
 namespace scanclean::detail {
 namespace {
@@ -48,9 +47,9 @@ Coincident find_coincident(const PointCloud& input) {
       if (bits_of(p[a][k]) != bits_of(p[b][k])) return false;
     return true;
   };
-  // Sort (hash of the position, index) pairs: equal positions have equal hashes, and the pairs
-  // are compact (no indirection while sorting). Within a run of equal hashes, the points are
-  // grouped by exact equality; a group's head is its smallest index.
+  // (hash of the position, index) pairs, sorted stably by the hash's top 33 bits: equal
+  // positions have equal hashes, so only the points of a run of equal top bits can coincide,
+  // and such runs are rare (about n^2 / 2^34 pairs of distinct points) and short.
   std::vector<std::pair<std::uint64_t, std::uint32_t>> key(n);
   parallel_each(n, [&](std::size_t i) {
     std::uint64_t h = 0x9E3779B97F4A7C15ULL;
@@ -61,26 +60,35 @@ Coincident find_coincident(const PointCloud& input) {
     }
     key[i] = {h, static_cast<std::uint32_t>(i)};
   });
-  tbb::parallel_sort(key.begin(), key.end());
-  std::vector<std::uint32_t> head(n);
-  bool any = false;
+  auto top = [](const std::pair<std::uint64_t, std::uint32_t>& e) { return e.first >> 31; };
+  {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch;
+    stable_radix_sort(key, top, scratch);
+  }
+  // Within a run (in index order), each point that equals an earlier head joins the earliest
+  // such head; the others are heads.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> copies;  // (point, its head)
+  std::vector<std::uint8_t> is_head;
   for (std::size_t b = 0; b < n;) {
     std::size_t e = b + 1;
-    while (e < n && key[e].first == key[b].first) ++e;
-    for (std::size_t k = b; k < e; ++k) {
-      const std::uint32_t i = key[k].second;
-      head[i] = i;
-      for (std::size_t q = b; q < k; ++q)  // the earliest equal one (runs are short)
-        if (head[key[q].second] == key[q].second && same(key[q].second, i)) {
-          head[i] = key[q].second;
-          any = true;
-          break;
-        }
+    while (e < n && top(key[e]) == top(key[b])) ++e;
+    if (e - b > 1) {
+      is_head.assign(e - b, 1);
+      for (std::size_t k = b + 1; k < e; ++k)
+        for (std::size_t q = b; q < k; ++q)
+          if (is_head[q - b] && same(key[q].second, key[k].second)) {
+            copies.emplace_back(key[k].second, key[q].second);
+            is_head[k - b] = 0;
+            break;
+          }
     }
     b = e;
   }
   Coincident c;
-  if (!any) return c;  // the common case: no copies (and no memory held for them)
+  if (copies.empty()) return c;  // the common case: no copies (and no memory held for them)
+  std::vector<std::uint32_t> head(n);
+  std::iota(head.begin(), head.end(), 0u);
+  for (const auto& [i, h] : copies) head[i] = h;
   c.group_of.resize(n);
   std::vector<std::uint32_t> group_at(n, kNone);
   for (std::size_t i = 0; i < n; ++i) {

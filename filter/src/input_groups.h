@@ -31,7 +31,7 @@ struct Coincident {
 };
 
 //! Groups the input points by exact position (bitwise equal coordinates; +0 and -0 are equal).
-//! Deterministic; a parallel sort of position hashes.
+//! Deterministic; a stable radix sort of position hashes.
 Coincident find_coincident(const PointCloud& input);
 
 //! The indices of the bulk (near) and of the far points (increasing). far is empty when no point

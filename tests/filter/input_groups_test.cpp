@@ -6,7 +6,13 @@
 
 #include <gtest/gtest.h>
 
+#include <tbb/task_arena.h>
+
+#include <algorithm>
 #include <cmath>
+#include <map>
+#include <random>
+#include <tuple>
 
 #include "scanclean/filter/robust_filter.h"
 #include "support/synthetic.h"
@@ -25,6 +31,48 @@ std::size_t total_merge_count(const FilterResult& r) {
   double sum = 0;
   for (double v : attr(r.cloud, "merge_count").values) sum += v;
   return static_cast<std::size_t>(sum);
+}
+
+TEST(InputGroupsTest, CoincidentGroupsMatchAMapOfPositions) {
+  // Oracle: a std::map from the coordinates (with -0 as +0) to the first index there. Many
+  // points, some copied (also as -0 and +0), in 1 and 2 threads.
+  std::mt19937 rng(57);  // seed 57
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  PointCloud c;
+  for (int i = 0; i < 200000; ++i) {
+    if (i > 0 && i % 7 == 0) {
+      c.positions.push_back(c.positions[rng() % c.positions.size()]);
+    } else {
+      Eigen::Vector3d p(u(rng), u(rng), i % 11 == 0 ? 0.0 : u(rng));
+      c.positions.push_back(p);
+    }
+    if (i % 13 == 0) c.positions.push_back({c.positions.back().x(), c.positions.back().y(), -0.0});
+  }
+  std::map<std::tuple<double, double, double>, std::size_t> first;
+  std::vector<std::size_t> want_first(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Vector3d& p = c.positions[i];
+    auto key = std::make_tuple(p.x() + 0.0, p.y() + 0.0, p.z() + 0.0);
+    want_first[i] = first.emplace(key, i).first->second;
+  }
+  for (const int threads : {1, 2}) {
+    tbb::task_arena arena(threads);
+    detail::Coincident got;
+    arena.execute([&] { got = detail::find_coincident(c); });
+    ASSERT_TRUE(got.any());
+    ASSERT_EQ(got.first.size(), first.size());
+    std::vector<std::uint32_t> count(got.first.size(), 0);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      ASSERT_EQ(got.first[got.group_of[i]], want_first[i]) << i;
+      ++count[got.group_of[i]];
+    }
+    EXPECT_EQ(count, got.count);
+    EXPECT_TRUE(std::is_sorted(got.first.begin(), got.first.end()));
+  }
+  // No copies: nothing held.
+  PointCloud distinct;
+  for (int i = 0; i < 1000; ++i) distinct.positions.push_back({u(rng), u(rng), u(rng)});
+  EXPECT_FALSE(detail::find_coincident(distinct).any());
 }
 
 TEST(InputGroupsTest, CoincidentCopiesFollowTheirPoint) {

@@ -1,9 +1,11 @@
 // The stable radix sort (filter/src/radix_sort.h) against std::stable_sort (the oracle): narrow
-// and 64-bit keys, many ties; and the float key's order against float's own.
+// and 64-bit keys, many ties, arrays sorted in parallel chunks; and the float key's order against
+// float's own.
 
 #include "../../filter/src/radix_sort.h"
 
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -29,6 +31,29 @@ TEST(RadixSortTest, StableSortMatchesStdStableSort) {
     stable_radix_sort(
         v, [](const auto& e) { return e.first; }, scratch);
     EXPECT_EQ(v, want) << bits << " bits";
+  }
+}
+
+TEST(RadixSortTest, LargeArraysSortedInChunksMatchStdStableSort) {
+  // Sizes that take one chunk, several, and a last chunk of another length; keys with many ties
+  // across chunks, so that stability between chunks is tested; in 1 and 2 threads.
+  std::mt19937_64 rng(47);  // seed 47
+  for (const std::size_t n : {65535u, 65536u * 3 + 17, 65536u * 70}) {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> v(n);
+    for (std::uint32_t i = 0; i < n; ++i) v[i] = {rng() % 5000, i};
+    auto want = v;
+    std::stable_sort(want.begin(), want.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const int threads : {1, 2}) {
+      auto got = v;
+      std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch;
+      tbb::task_arena arena(threads);
+      arena.execute([&] {
+        stable_radix_sort(
+            got, [](const auto& e) { return e.first; }, scratch);
+      });
+      EXPECT_EQ(got, want) << n << " records, " << threads << " threads";
+    }
   }
 }
 
