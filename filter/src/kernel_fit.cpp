@@ -115,7 +115,15 @@ FitSums fit_sums_scalar(const FitSample* samples, std::size_t n) {
   return s;
 }
 
-bool fit_samples(std::vector<FitSample>& nb, const Eigen::Vector3d& centre, double h, int k_min,
+bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
+                 int k_min, double eigen_floor, KernelFit& out) {
+  std::size_t n = samples.size();
+  const bool ok = fit_samples(samples.data(), n, centre, h, k_min, eigen_floor, out);
+  samples.resize(n);
+  return ok;
+}
+
+bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, double h, int k_min,
                  double eigen_floor, KernelFit& out) {
   constexpr double kTrim = 3.0;
   constexpr int kRefits = 2;
@@ -126,10 +134,10 @@ bool fit_samples(std::vector<FitSample>& nb, const Eigen::Vector3d& centre, doub
   Eigen::Matrix3d cov;
   double s0_final = 0;
   for (int round = 0;; ++round) {
-    const FitSums fs = fit_sums(nb.data(), nb.size());
+    const FitSums fs = fit_sums(nb, n);
     const double s0 = fs.s0, sx = fs.sx, sy = fs.sy, sz = fs.sz, sxx = fs.sxx, syy = fs.syy,
                  szz = fs.szz, sxy = fs.sxy, sxz = fs.sxz, syz = fs.syz;
-    if (static_cast<int>(nb.size()) < k_min || !(s0 > 0)) return false;
+    if (static_cast<int>(n) < k_min || !(s0 > 0)) return false;
     s0_final = s0;
     m = Eigen::Vector3d(sx / s0, sy / s0, sz / s0);
     Eigen::Matrix3d c;
@@ -144,18 +152,19 @@ bool fit_samples(std::vector<FitSample>& nb, const Eigen::Vector3d& centre, doub
     es.computeDirect(cov);
     if (round == kRefits) break;
     // Trim (in units of h): residuals from the plane beyond kTrim standard deviations.
-    const Eigen::Vector3d n = es.eigenvectors().col(0);
+    const Eigen::Vector3d nrm = es.eigenvectors().col(0);
     const double var = std::max(es.eigenvalues()[0], floor2);
     const double limit2 = kTrim * kTrim * var * h2;
-    const std::size_t before = nb.size();
-    nb.erase(std::remove_if(nb.begin(), nb.end(),
-                            [&](const FitSample& q) {
-                              const double r = n.x() * (q.x - m.x()) + n.y() * (q.y - m.y()) +
-                                               n.z() * (q.z - m.z());
-                              return r * r > limit2;
-                            }),
-             nb.end());
-    if (nb.size() == before) break;
+    const std::size_t before = n;
+    n = static_cast<std::size_t>(std::remove_if(nb, nb + n,
+                                                [&](const FitSample& q) {
+                                                  const double r = nrm.x() * (q.x - m.x()) +
+                                                                   nrm.y() * (q.y - m.y()) +
+                                                                   nrm.z() * (q.z - m.z());
+                                                  return r * r > limit2;
+                                                }) -
+                                 nb);
+    if (n == before) break;
   }
   out.weight = s0_final;
   out.m = m;

@@ -4,6 +4,7 @@
 //! tests share it.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstddef>
 #include <vector>
 
@@ -50,6 +51,9 @@ FitSums fit_sums_scalar(const FitSample* samples, std::size_t n);
 //! than k_min samples remain. Trims `samples` in place.
 bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
                  int k_min, double eigen_floor, KernelFit& out);
+//! As above on samples[0, n); n becomes the number left after trimming.
+bool fit_samples(FitSample* samples, std::size_t& n, const Eigen::Vector3d& centre, double h,
+                 int k_min, double eigen_floor, KernelFit& out);
 
 //! The normal of a fitted kernel: the sensor normal vi when `use_dir` (an oriented fit at a point
 //! with a sensor normal), the PCA normal (e.col(0)) otherwise; with `orients_only` the PCA
@@ -77,8 +81,11 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
   const double h2 = h * h, inv_h2 = 1.0 / h2;
   const bool use_dir = oriented && d.has_v(i);
   const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
-  thread_local std::vector<FitSample> nb;
-  nb.clear();
+  // The neighbours go to a buffer that only grows, through a pointer and a count kept in
+  // registers (a push_back on the thread_local vector stored its end at every sample).
+  thread_local std::vector<FitSample> buf;
+  FitSample* nb = buf.data();
+  std::size_t n = 0, cap = buf.size();
   visit([&](std::size_t j) {
     const Eigen::Vector3d dj = d.p[j] - pi;
     const double r2 = dj.squaredNorm();
@@ -87,10 +94,15 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
     double t = 1.0 - r2 * inv_h2;
     t *= t;
     t *= t;
-    nb.push_back({dj.x(), dj.y(), dj.z(), t});
+    if (n == cap) {
+      buf.resize(std::max<std::size_t>(256, 2 * cap));
+      nb = buf.data();
+      cap = buf.size();
+    }
+    nb[n++] = {dj.x(), dj.y(), dj.z(), t};
   });
-  if (untrimmed) *untrimmed = nb;
-  if (!fit_samples(nb, pi, h, k_min, eigen_floor, out)) return false;
+  if (untrimmed) untrimmed->assign(nb, nb + n);
+  if (!fit_samples(nb, n, pi, h, k_min, eigen_floor, out)) return false;
   out.n = kernel_normal(out, use_dir, d.v_orients_only, vi);
   return true;
 }
