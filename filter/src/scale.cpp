@@ -150,26 +150,27 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
           Eigen::Vector3f lo, hi;  // bounding box of the run's points
         };
         thread_local std::vector<Run> runs;
-        bx.clear();
-        by.clear();
-        bz.clear();
+        // The arrays only grow (resizing them down and up again zero-filled them per cell):
+        // nb says how much of them this cell uses.
+        std::size_t nb = 0;
+        sr.index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) { nb += e - b; });
+        if (bx.size() < nb + 8)
+          for (auto* v : {&bx, &by, &bz, &d2, &hit, &band, &cx, &cy, &cz}) v->resize(2 * nb + 8);
         runs.clear();
+        std::size_t k = 0;
         sr.index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) {
-          Run run{bx.size(), bx.size(), sr.index->slot_point(b), sr.index->slot_point(b)};
-          for (std::uint32_t s = b; s < e; ++s) {
+          Run run{k, k, sr.index->slot_point(b), sr.index->slot_point(b)};
+          for (std::uint32_t s = b; s < e; ++s, ++k) {
             const Eigen::Vector3f& p = sr.index->slot_point(s);
-            bx.push_back(p.x());
-            by.push_back(p.y());
-            bz.push_back(p.z());
+            bx[k] = p.x();
+            by[k] = p.y();
+            bz[k] = p.z();
             run.lo = run.lo.cwiseMin(p);
             run.hi = run.hi.cwiseMax(p);
           }
-          run.e = bx.size();
+          run.e = k;
           runs.push_back(run);
         });
-        hit.resize(bx.size());
-        d2.resize(bx.size());
-        band.resize(bx.size() + 8);
         const float reach = sr.index->max_adjacent_radius();
         // The K-th distance of the point in slot s, exact: bands (below) over the np points
         // (px, py, pz), which hold every point within `within` of it, else over the 27 cells'
@@ -291,9 +292,6 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
           // distance to any query in it (float rounding is monotone): the points below `within`
           // of a query are all kept; 0.1 % more to spare.
           const float w2 = within * within * 1.001f;
-          cx.resize(bx.size() + 8);
-          cy.resize(bx.size() + 8);
-          cz.resize(bx.size() + 8);
           std::size_t nc = 0;
           const float glo3[3] = {glo.x(), glo.y(), glo.z()}, ghi3[3] = {ghi.x(), ghi.y(), ghi.z()};
           for (const Run& run : runs) {
