@@ -64,13 +64,28 @@ float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, 
     if (t >= static_cast<float>(kBins - 1) || t != t) return kBins - 1;
     return t >= 1.0f ? static_cast<std::size_t>(t) : 0;
   };
-  std::array<std::uint32_t, kBins> count{};
-  for (std::size_t i = 0; i < n; ++i) ++count[bin(v[i])];
+  // Four interleaved counts, so that runs of values in one bin do not wait on each other's
+  // increments.
+  std::array<std::array<std::uint32_t, kBins>, 4> counts{};
+  std::size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    ++counts[0][bin(v[i])];
+    ++counts[1][bin(v[i + 1])];
+    ++counts[2][bin(v[i + 2])];
+    ++counts[3][bin(v[i + 3])];
+  }
+  for (; i < n; ++i) ++counts[0][bin(v[i])];
+  std::array<std::uint32_t, kBins> count;
+  for (std::size_t c = 0; c < kBins; ++c)
+    count[c] = (counts[0][c] + counts[1][c]) + (counts[2][c] + counts[3][c]);
   std::size_t b = 0, before = 0;
   while (before + count[b] <= k) before += count[b++];
   std::size_t m = 0;
-  for (std::size_t i = 0; i < n; ++i)
-    if (bin(v[i]) == b) v[m++] = v[i];
+  for (std::size_t j = 0; j < n; ++j) {
+    const float x = v[j];
+    v[m] = x;
+    m += bin(x) == b ? 1 : 0;
+  }
   return kth_smallest_small(v, m, k - before);
 }
 
