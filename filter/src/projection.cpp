@@ -18,8 +18,8 @@ struct ProjectionContext {
   float t2 = 9;  // truncation_sigma^2
   // A kernel j is gathered only within reach_scale sigma_j + kRegatherMargin h of where the
   // gather is (KernelRecord::kSigma): farther, it is truncated wherever the point can be before
-  // it gathers again. For the first gather of a point the off-surface test also reads, up to
-  // outlier_sigma instead of truncation_sigma.
+  // it gathers again. The off-surface test may also read the kernels up to first_reach_scale
+  // (outlier_sigma) sigma_j, gathered apart when it needs them.
   float reach_scale = 3, first_reach_scale = 3;
   float slab2 = 1;             // slab^2
   bool l_from_step = true;     // slab >= 1: the step keeps every kernel L keeps (StepSums)
@@ -100,19 +100,31 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   bool have_ref = nref.squaredNorm() > 0.5f;
   Eigen::Vector3f of = x.cast<float>();
   Eigen::Vector3d origin = of.cast<double>();
-  gather(ctx, of, h, ctx.first_reach_scale, buf);
+  gather(ctx, of, h, ctx.reach_scale, buf);
   // The first step reuses the e_j and d_j of the off-surface test, at the same position.
   bool first_step_ready = false;
   if (ctx.off_surface.threshold2 > 0 && buf.count > 0) {
     // Only points the kernels support at all (as the first iteration will check); the others
-    // are left to be flagged unsupported.
+    // are left to be flagged unsupported. The kernels the steps read (within reach_scale
+    // sigma_j) decide that: the others have e_j above truncation_sigma^2 here. Kernels up to
+    // first_reach_scale sigma_j may also vouch for the point: they are gathered only when
+    // those within reach_scale do not (few points; the steps then read the shorter list).
     const Eigen::Vector3d xl = x - origin;
     const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
                          static_cast<float>(xl.z())};
     if (min_mahalanobis(buf, xf) < ctx.t2 && !vouched(ctx.off_surface, buf, xl, nref)) {
-      out.state = ProjectionState::kOffSurface;
-      out.normal = nref;
-      return out;
+      bool wide_vouched = false;
+      if (ctx.first_reach_scale > ctx.reach_scale) {
+        thread_local B wide;
+        gather(ctx, of, h, ctx.first_reach_scale, wide);
+        min_mahalanobis(wide, xf);
+        wide_vouched = vouched(ctx.off_surface, wide, xl, nref);
+      }
+      if (!wide_vouched) {
+        out.state = ProjectionState::kOffSurface;
+        out.normal = nref;
+        return out;
+      }
     }
     first_step_ready = true;
   }

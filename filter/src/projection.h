@@ -44,8 +44,11 @@ struct Projected {
 //! point that moves farther gathers again. Of those kernels, a gather keeps only the ones within
 //! 1.01 truncation_sigma sigma_j + kRegatherMargin h (KernelRecord::kSigma): the others are
 //! truncated wherever the point can be before it gathers again (e_j >= |x - c_j|^2 / sigma_j^2),
-//! so they would add nothing. A point's first gather, which the off-surface test also reads, uses
-//! the larger of truncation_sigma and outlier_sigma instead.
+//! so they would add nothing. The off-surface test reads the same first gather: its kernels
+//! decide whether the point is near the surface at all (the others have e_j > truncation_sigma^2
+//! there), and only when none of them vouches for the point are the kernels up to the larger of
+//! truncation_sigma and outlier_sigma gathered apart (on the 2.1M sphere of the speed suite the
+//! first lists were 1.4 times as long when they held those).
 constexpr double kRegatherMargin = 1.0 / 8;
 double candidate_radius(const FilterOptions& o);
 

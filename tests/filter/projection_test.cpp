@@ -1,12 +1,17 @@
 // The projection phase (filter/src/projection.h): the secant step of the normal update against
-// the root of a linear normal part (the oracle), and its convergence on wide adaptive kernels.
+// the root of a linear normal part (the oracle), its convergence on wide adaptive kernels, and
+// the off-surface decisions against the test over every kernel in reach (brute force).
 
 #include "../../filter/src/projection.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
+#include "../../filter/src/candidate_eval.h"
+#include "../../filter/src/kernels.h"
+#include "../../filter/src/off_surface.h"
 #include "scanclean/filter/robust_filter.h"
 #include "support/synthetic.h"
 
@@ -73,6 +78,80 @@ TEST(ProjectionTest, WideAdaptiveKernelsConverge) {
   double s = 0;
   for (const auto& p : r.cloud.positions) s += p.z() * p.z();
   EXPECT_LT(std::sqrt(s / static_cast<double>(r.cloud.size())), 0.6 * 0.025);
+}
+
+TEST(ProjectionTest, OffSurfaceDecisionsMatchTheTestOverEveryKernelInReach) {
+  // The projection gathers the kernels its steps read (within 1.01 truncation_sigma sigma_j +
+  // h / 8) and gathers those within outlier_sigma sigma_j only when the first do not vouch for
+  // the point. Oracle: the test over every kernel within the candidate radius (brute force):
+  // off the surface exactly when some kernel has e_j < truncation_sigma^2 and none vouches.
+  const double h = 0.008;
+  PointCloud c = test::noisy_plane(3000, 0.1, 0.0005, 41);  // seed 41
+  // Points above the plane, from inside the noise to well off it: some vouched for only by
+  // kernels beyond the steps' reach, some not at all.
+  std::mt19937 rng(43);  // seed 43
+  std::uniform_real_distribution<double> u(-0.04, 0.04), z(0.0, 0.006);
+  for (int k = 0; k < 300; ++k) c.positions.emplace_back(u(rng), u(rng), z(rng));
+  std::vector<Eigen::Vector3f> pf;
+  for (const auto& p : c.positions) pf.push_back(p.cast<float>());
+  auto index = std::make_unique<NeighborIndex>(pf, h * 1.001);
+  PointSet d;
+  d.h = h;
+  for (std::uint32_t i : index->order()) d.p.push_back(c.positions[i]);
+  FilterOptions o;
+  KernelParams prm;
+  prm.options = &o;
+  prm.cell = h;
+  prm.gather_factor = candidate_radius(o);
+  prm.keep_fits = true;
+  std::vector<Eigen::Vector3f> nref;
+  const KernelSet ks = build_kernels(d, index, PointIndexIds::kSlots, prm, nref, "kernels");
+  std::vector<Eigen::Vector3d> x = d.p;
+  Projected pr;
+  project_all(d, ks, nref, o, true, false, std::vector<std::uint8_t>(d.p.size(), 0), x, pr,
+              "projection");
+  OffSurfaceTest test;
+  test.kernels = &ks;
+  test.threshold2 = static_cast<float>(o.outlier_sigma * o.outlier_sigma);
+  test.floor2 = o.eigen_floor * o.eigen_floor;
+  const float t2 = static_cast<float>(o.truncation_sigma * o.truncation_sigma);
+  const float r = static_cast<float>(candidate_radius(o) * h);
+  std::size_t off = 0, vouched_wide = 0;
+  for (std::size_t i = 0; i < d.p.size(); ++i) {
+    const Eigen::Vector3f of = d.p[i].cast<float>();
+    const float origin[3] = {of.x(), of.y(), of.z()};
+    CandidateBuffer all;
+    for (std::size_t s = 0; s < ks.records.size(); ++s)
+      if ((ks.index->slot_point(s) - of).norm() < r)
+        all.push_record(static_cast<unsigned>(s), ks.records[s], origin, 1.0f);
+    all.finish();
+    if (all.count == 0) continue;
+    const Eigen::Vector3d xl = d.p[i] - of.cast<double>();
+    const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
+                         static_cast<float>(xl.z())};
+    const bool near = min_mahalanobis(all, xf) < t2;
+    const bool want = near && !vouched(test, all, xl, nref[i]);
+    EXPECT_EQ(pr.state[i] == ProjectionState::kOffSurface, want) << "point " << i;
+    off += want ? 1 : 0;
+    // Kernels beyond the steps' reach vouch for some of them.
+    if (near && !want) {
+      CandidateBuffer steps;
+      for (std::size_t k = 0; k < all.count; ++k) {
+        const unsigned s = all.slot[k];
+        const float reach = 1.01f * static_cast<float>(o.truncation_sigma) * ks.records[s].sigma() +
+                            static_cast<float>(kRegatherMargin * h);
+        if ((ks.index->slot_point(s) - of).norm() < reach)
+          steps.push_record(s, ks.records[s], origin, 1.0f);
+      }
+      steps.finish();
+      min_mahalanobis(steps, xf);
+      vouched_wide += vouched(test, steps, xl, nref[i]) ? 0 : 1;
+    }
+  }
+  EXPECT_GT(off, 20u);  // the test found outliers
+  // And the wide gather was needed here: a point only kernels beyond the steps' reach vouch for
+  // (1 of the 300 in this cloud).
+  EXPECT_GE(vouched_wide, 1u);
 }
 
 }  // namespace
