@@ -30,7 +30,8 @@ struct KernelSet {
 struct KernelParams {
   const FilterOptions* options = nullptr;
   bool oriented = false;     //!< sensor normals select the neighbours (kernel_fit.h)
-  double cell = 0;           //!< grid cell of the centre index (ScaleChoice::h_grid)
+  double cell = 0;           //!< grid cell of the point index (ScaleChoice::h_grid)
+  double kernel_cell = 0;    //!< of the centre index (ScaleChoice::h_grid_kernels; 0: cell)
   double gather_factor = 1;  //!< the projection's candidate radius / h (candidate_radius)
   std::size_t stride = 1;    //!< a kernel at every stride-th point, weight x stride
   bool keep_fits = false;    //!< keep the fits for the off-surface test's downdate

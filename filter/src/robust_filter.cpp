@@ -242,6 +242,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   prm.options = &o;
   prm.oriented = use_v;
   prm.cell = scale.h_grid;
+  prm.kernel_cell = scale.h_grid_kernels;
   prm.gather_factor = detail::candidate_radius(o);
   prm.stride = kernel_stride(o, h, st.h0);
   if (o.scale == ScaleMode::kAuto) prm.noise_sigma = std::max(st.noise_sigma, o.eigen_floor * h);

@@ -312,7 +312,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
   }
   in.h = h;
   sr.h = h;
-  sr.h_grid = h;
+  sr.h_grid = sr.h_grid_kernels = h;
   if (in.hi.empty()) {
     sr.h_min = sr.h_max = h;
   } else {  // kAdaptive, or a scale per region (scale_regions)
@@ -323,6 +323,9 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
     const auto at = q.begin() + static_cast<std::ptrdiff_t>((q.size() - 1) * 99 / 100);
     std::nth_element(q.begin(), at, q.end());
     sr.h_grid = std::clamp(static_cast<double>(*at), h, 1.7 * h);
+    const auto at_k = q.begin() + static_cast<std::ptrdiff_t>((q.size() - 1) * 999 / 1000);
+    std::nth_element(at, at_k, q.end());  // above the 99th percentile: the same set
+    sr.h_grid_kernels = std::clamp(static_cast<double>(*at_k), sr.h_grid, 1.7 * h);
   }
   if (sr.index && !(sr.index->cell() >= sr.h_grid * 1.001 && sr.index->cell() <= sr.h_grid * 1.7))
     sr.index.reset();

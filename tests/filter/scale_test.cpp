@@ -68,7 +68,7 @@ TEST(ScaleTest, AdaptiveKernelSizesAreTheKthNeighbourDistances) {
   EXPECT_DOUBLE_EQ(s.h_grid, 1.7 * s.h);
 }
 
-TEST(ScaleTest, GridsAreSizedForTheNinetyNinthPercentileOfTheAdaptiveSizes) {
+TEST(ScaleTest, GridsAreSizedForHighPercentilesOfTheAdaptiveSizes) {
   // One density with a few far points: the 99th percentile lies between h and 1.7 h.
   PointCloud c = test::noisy_plane(3000, 0.1, 0.002, 64);
   Input x = input_of(c);
@@ -82,12 +82,19 @@ TEST(ScaleTest, GridsAreSizedForTheNinetyNinthPercentileOfTheAdaptiveSizes) {
   const double want = std::clamp(static_cast<double>(q[p99]), s.h, 1.7 * s.h);
   EXPECT_EQ(s.h_grid, want);
   EXPECT_GT(s.h_grid, s.h);
+  // The kernel centres' grid: the 99.9th percentile, within [h_grid, 1.7 h].
+  const std::size_t p999 = (q.size() - 1) * 999 / 1000;
+  std::nth_element(q.begin(), q.begin() + static_cast<std::ptrdiff_t>(p999), q.end());
+  EXPECT_EQ(s.h_grid_kernels, std::clamp(static_cast<double>(q[p999]), s.h_grid, 1.7 * s.h));
+  EXPECT_GT(s.h_grid_kernels, s.h_grid);
   // One h: the grids are sized for it.
   Input y = input_of(c);
   FilterOptions fixed;
   fixed.scale = ScaleMode::kFixed;
   fixed.h = 0.01;
-  EXPECT_EQ(choose_scale(y.in, y.pf, 0.15, false, fixed).h_grid, 0.01);
+  const ScaleChoice f = choose_scale(y.in, y.pf, 0.15, false, fixed);
+  EXPECT_EQ(f.h_grid, 0.01);
+  EXPECT_EQ(f.h_grid_kernels, 0.01);
 }
 
 TEST(ScaleTest, FixedScaleIsTakenAsGiven) {
