@@ -123,8 +123,19 @@ void band_scalar(const float* x, const float* y, const float* z, std::size_t b, 
     // The band's lanes, left-packed; all 8 are stored, m advances by the selected.
     m += store_left_packed(band + m, d2, static_cast<unsigned>(_mm256_movemask_ps(in)));
   }
+  // The last few through masked loads, not a scalar loop: callers pass the runs of a cell's
+  // neighbourhood (about 24 points each at 2.1M), so the tails were a large share.
+  if (j < n) {
+    const __m256i lanes = lanes_below(n - j);
+    const unsigned valid = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(lanes)));
+    const __m256 d2 = squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
+    const __m256 under = _mm256_cmp_ps(d2, lo, _CMP_LT_OQ);
+    const __m256 in = _mm256_andnot_ps(under, _mm256_cmp_ps(d2, hi, _CMP_LT_OQ));
+    count += static_cast<std::size_t>(
+        __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under)) & valid));
+    m += store_left_packed(band + m, d2, static_cast<unsigned>(_mm256_movemask_ps(in)) & valid);
+  }
   below += count;
-  band_scalar(x, y, z, j, n, q, lo2, hi2, below, band, m);
 }
 
 void within_scalar(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
@@ -163,6 +174,21 @@ void within_scalar(const float* x, const float* y, const float* z, const std::ui
           __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(le))));
     }
   }
+  if (j < n) {  // the last few through masked loads, as band_avx2
+    const __m256i lanes = lanes_below(n - j);
+    const __m256 d2 = squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
+    const __m256 in = _mm256_and_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ), _mm256_castsi256_ps(lanes));
+    const __m256i c = _mm256_maskload_epi32(reinterpret_cast<const int*>(cnt + j), lanes);
+    sum = _mm256_add_epi32(sum, _mm256_and_si256(c, _mm256_castps_si256(in)));
+    within +=
+        static_cast<std::size_t>(__builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(in))));
+    if (lik) {
+      const __m256 l = _mm256_maskload_ps(lik + j, lanes);
+      const __m256 le = _mm256_and_ps(in, _mm256_cmp_ps(l, lm, _CMP_LE_OQ));
+      below += static_cast<std::size_t>(
+          __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(le))));
+    }
+  }
   alignas(32) std::uint32_t lanes[8];
   _mm256_store_si256(reinterpret_cast<__m256i*>(lanes), sum);
   std::uint32_t total = 0;
@@ -170,7 +196,6 @@ void within_scalar(const float* x, const float* y, const float* z, const std::ui
   out.sum += total;
   out.n += within;
   out.at_or_below += below;
-  within_scalar(x, y, z, cnt, lik, j, n, q, r2, lik_max, out);
 }
 
 // The squared distance from p to the box [lo, hi]: the gaps per axis, rounded in float.
@@ -203,10 +228,16 @@ void near_box_scalar(const float* x, const float* y, const float* z, const std::
   const __m256 lx = _mm256_set1_ps(lo[0]), ly = _mm256_set1_ps(lo[1]), lz = _mm256_set1_ps(lo[2]);
   const __m256 hx = _mm256_set1_ps(hi[0]), hy = _mm256_set1_ps(hi[1]), hz = _mm256_set1_ps(hi[2]);
   const __m256 rr = _mm256_set1_ps(r2), zero = _mm256_setzero_ps();
-  std::size_t j = 0;
-  for (; j + 8 <= n; j += 8) {
-    const __m256 px = _mm256_loadu_ps(x + j), py = _mm256_loadu_ps(y + j),
-                 pz = _mm256_loadu_ps(z + j);
+  // The last few points (n not a multiple of 8) through masked loads, which read nothing past
+  // the arrays: runs of a cell's neighbourhood are short, and a scalar tail took a fifth of the
+  // time.
+  for (std::size_t j = 0; j < n; j += 8) {
+    const std::size_t left = n - j;
+    const bool whole = left >= 8;
+    const __m256i in = lanes_below(whole ? 8 : left);
+    const __m256 px = whole ? _mm256_loadu_ps(x + j) : _mm256_maskload_ps(x + j, in);
+    const __m256 py = whole ? _mm256_loadu_ps(y + j) : _mm256_maskload_ps(y + j, in);
+    const __m256 pz = whole ? _mm256_loadu_ps(z + j) : _mm256_maskload_ps(z + j, in);
     const __m256 ex =
         _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(lx, px), _mm256_sub_ps(px, hx)), zero);
     const __m256 ey =
@@ -216,15 +247,22 @@ void near_box_scalar(const float* x, const float* y, const float* z, const std::
     const __m256 g2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey)),
                                     _mm256_mul_ps(ez, ez));
     const unsigned mask =
-        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(g2, rr, _CMP_LT_OQ)));
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(g2, rr, _CMP_LT_OQ))) &
+        static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(in)));
     if (mask == 0) continue;
-    if (slot) store_left_packed(out.slot + m, slot + j, mask);
-    if (extra) store_left_packed(out.extra + m, _mm256_loadu_ps(extra + j), mask);
+    if (slot)
+      store_left_packed(out.slot + m,
+                        whole ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slot + j))
+                              : _mm256_maskload_epi32(reinterpret_cast<const int*>(slot + j), in),
+                        mask);
+    if (extra)
+      store_left_packed(out.extra + m,
+                        whole ? _mm256_loadu_ps(extra + j) : _mm256_maskload_ps(extra + j, in),
+                        mask);
     store_left_packed(out.x + m, px, mask);
     store_left_packed(out.y + m, py, mask);
     m += store_left_packed(out.z + m, pz, mask);
   }
-  near_box_scalar(x, y, z, slot, extra, j, n, lo, hi, r2, out, m);
 }
 
 bool have_avx2() {
