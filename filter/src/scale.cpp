@@ -143,7 +143,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       if (sr.index->cell_count() == 0)  // no grid (cannot happen with a cell > 0; kept safe)
         parallel_each(N, [&](std::size_t i) { hi[i] = static_cast<float>(kth(pf[i])); });
       parallel_each_reporting(sr.index->cell_count(), o, "scale", [&](std::size_t c) {
-        thread_local std::vector<float> bx, by, bz, d2, hit, band, cx, cy, cz;
+        thread_local std::vector<float> bx, by, bz, hit, band, cx, cy, cz;
         thread_local std::vector<std::uint8_t> octant;
         struct Run {
           std::size_t b, e;
@@ -155,7 +155,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
         std::size_t nb = 0;
         sr.index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) { nb += e - b; });
         if (bx.size() < nb + 8)
-          for (auto* v : {&bx, &by, &bz, &d2, &hit, &band, &cx, &cy, &cz}) v->resize(2 * nb + 8);
+          for (auto* v : {&bx, &by, &bz, &hit, &band, &cx, &cy, &cz}) v->resize(2 * nb + 8);
         runs.clear();
         std::size_t k = 0;
         sr.index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) {
@@ -231,18 +231,14 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
           }
           // All points within r of q when r <= max_adjacent_radius(); first the start radius,
           // then (rarely) the largest the 27 cells answer, then the general search.
+          // (A band from 0: every distance below r2, in order.)
           auto select = [&](float r2) {
-            std::size_t n = 0;
+            const float qa[3] = {qx, qy, qz};
+            std::size_t n = 0, below = 0;
             for (const Run& run : runs) {
               if (!(gap2(run) < r2)) continue;
-              for (std::size_t j = run.b; j < run.e; ++j) {
-                const float dx = bx[j] - qx, dy = by[j] - qy, dz = bz[j] - qz;
-                d2[j] = dx * dx + dy * dy + dz * dz;
-              }
-              for (std::size_t j = run.b; j < run.e; ++j) {
-                hit[n] = d2[j];
-                n += d2[j] < r2 ? 1 : 0;
-              }
+              detail::count_below_and_band(bx.data() + run.b, by.data() + run.b, bz.data() + run.b,
+                                           run.e - run.b, qa, 0.0f, r2, below, hit.data(), n);
             }
             return n;
           };
