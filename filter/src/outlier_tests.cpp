@@ -118,13 +118,21 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
       const float* around_lik = thinned ? lik_t.data() : lik.data();
       const float* around_moved = thinned ? moved_t.data() : moved.data();
       // Through the per-thread cell cache (cell_select.h): the same points as the index's own
-      // radius query. visit(a): a indexes around_cnt, around_lik and around_moved. Without the
-      // cache's parts: on the 2.1M-point sphere at k = 250 a part served three queries and cost
-      // more to make than it saved.
+      // radius query, in its order; each indexes around_cnt, around_lik and around_moved.
+      // Without the cache's parts: on the 2.1M-point sphere at k = 250 a part served three
+      // queries and cost more to make than it saved.
       const std::uint64_t cell_key = new_cell_cache_key();
-      auto for_each_around = [&](std::size_t s, auto&& visit) {
-        thread_cell_select().for_each_slot_within(thinned ? *thinned : ridx, cell_key,
-                                                  ridx.slot_point(s), hs[s], visit, false);
+      // The points around s: their count, and a pointer to them (valid until the next call).
+      auto around = [&](std::size_t s) -> std::pair<const std::uint32_t*, std::size_t> {
+        const NeighborIndex& index = thinned ? *thinned : ridx;
+        CellSelect& sel = thread_cell_select();
+        const std::size_t n = sel.select(index, cell_key, ridx.slot_point(s), hs[s], false);
+        if (n != CellSelect::kNotGrid) return {sel.hits(), n};
+        thread_local std::vector<std::uint32_t> slots;
+        slots.clear();
+        index.for_each_slot_within(ridx.slot_point(s), hs[s],
+                                   [&](std::uint32_t a, float) { slots.push_back(a); });
+        return {slots.data(), slots.size()};
       };
       // Displacement test: the median of the moves around s and 1.4826 x their median absolute
       // deviation (the robust standard deviation), floored at 0.02 h; none (scale 0) when fewer
@@ -171,7 +179,6 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
       std::vector<MoveStats> anchor_stats(anchors);
       parallel_each(R, [&](std::size_t s) {
         thread_local std::vector<float> around_d;
-        around_d.clear();
         const bool anchor = by_d && s % kDisplacementAnchor == 0;
         // Likelihood ratio: L_s < ratio x Q1, Q1 the element at rank floor(n / 4) of the n
         // likelihoods around, holds exactly when at most floor(n / 4) of them have ratio x L_q
@@ -197,14 +204,17 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         }
         std::uint64_t sum = 0;
         std::size_t n_l = 0, at_or_below = 0;
-        for_each_around(s, [&](std::uint32_t a) {
+        const auto [hits, na] = around(s);
+        if (anchor) around_d.resize(na);
+        for (std::size_t k = 0; k < na; ++k) {
+          const std::uint32_t a = hits[k];
           sum += around_cnt[a];
           if (by_l) {
             ++n_l;
             at_or_below += o.likelihood_ratio * static_cast<double>(around_lik[a]) <= l_s ? 1 : 0;
           }
-          if (anchor) around_d.push_back(around_moved[a]);
-        });
+          if (anchor) around_d[k] = around_moved[a];
+        }
         rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
         if (by_l) low_l[s] = n_l > 0 && at_or_below <= n_l / 4 ? 1 : 0;
         if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats(around_d, s);
@@ -237,8 +247,9 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
               return;
           }
           thread_local std::vector<float> around_d;
-          around_d.clear();
-          for_each_around(s, [&](std::uint32_t a) { around_d.push_back(around_moved[a]); });
+          const auto [hits, na] = around(s);
+          around_d.resize(na);
+          for (std::size_t k = 0; k < na; ++k) around_d[k] = around_moved[hits[k]];
           displaced[s] = is_displaced(s, move_stats(around_d, s)) ? 1 : 0;
         });
       const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
