@@ -1,6 +1,10 @@
 #include "input_groups.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -124,11 +128,21 @@ FarSplit split_far_points(const PointCloud& input) {
   const double margin = 4 * std::max(size, 1e-3);
   lo -= Eigen::Vector3d::Constant(margin);
   hi += Eigen::Vector3d::Constant(margin);
-  for (std::size_t i = 0; i < n; ++i) {
+  auto inside = [&](std::size_t i) {
     const Eigen::Vector3d& p = input.positions[i];
-    const bool inside = (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all();
-    (inside ? split.near : split.far).push_back(i);
-  }
+    return (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all();
+  };
+  // Counted first (in parallel), so that both lists are allocated once.
+  std::atomic<std::size_t> far_count{0};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::size_t c = 0;
+                      for (std::size_t i = r.begin(); i < r.end(); ++i) c += inside(i) ? 0 : 1;
+                      far_count.fetch_add(c, std::memory_order_relaxed);
+                    });
+  split.far.reserve(far_count.load());
+  split.near.reserve(n - far_count.load());
+  for (std::size_t i = 0; i < n; ++i) (inside(i) ? split.near : split.far).push_back(i);
   // No point in the box: there is no bulk to keep the others apart from (a few points, whose
   // percentiles are single points). One group, so that the far group's own split, which
   // run_split makes next, always has fewer points than the cloud it came from.
