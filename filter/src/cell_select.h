@@ -77,9 +77,9 @@ class CellSelect {
     std::vector<std::uint32_t> slot;
     std::vector<float> sigma;  // per slot, when select_within_reach filled it (else empty)
     std::size_t n = 0;         // the entry's points, padded (the arrays may be longer)
-    // A part (the parts_ below): the octant of `cell`, its box, and the radius it serves.
+    // A part (the parts_ below): the octant of `cell`, the radius it serves, and whether it
+    // copied sigma.
     int octant = -1;
-    Eigen::Vector3f lo = Eigen::Vector3f::Zero(), hi = Eigen::Vector3f::Zero();
     float reach = 0;
     bool has_sigma = false;
   };

@@ -24,8 +24,8 @@ namespace {
 // took the scale phase from 2.15 to 1.90 s against +-5 % and bands three times as wide.
 constexpr float kGuessBand = 0.03f;
 constexpr int kGuessAttempts = 4;
-// The compact copies of a cell's octants hold the points within this factor of the last K-th
-// distance found of their bounding box.
+// The compact copy of a cell's octant holds the points within this factor times the last K-th
+// distance found of the octant's bounding box.
 constexpr float kGroupReach = 1.12f;
 
 }  // namespace
