@@ -133,8 +133,11 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
   Eigen::Vector3d m;
   Eigen::Matrix3d cov;
   double s0_final = 0;
+  // The sums of the first round are formed over the samples; each later round's are the last
+  // round's with the trimmed samples' terms taken out (a few of some 250: a pass over them all
+  // again cost more than the eigen-decomposition).
+  FitSums fs = fit_sums(nb, n);
   for (int round = 0;; ++round) {
-    const FitSums fs = fit_sums(nb, n);
     const double s0 = fs.s0, sx = fs.sx, sy = fs.sy, sz = fs.sz, sxx = fs.sxx, syy = fs.syy,
                  szz = fs.szz, sxy = fs.sxy, sxz = fs.sxz, syz = fs.syz;
     if (static_cast<int>(n) < k_min || !(s0 > 0)) return false;
@@ -156,14 +159,27 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
     const double var = std::max(es.eigenvalues()[0], floor2);
     const double limit2 = kTrim * kTrim * var * h2;
     const std::size_t before = n;
-    n = static_cast<std::size_t>(std::remove_if(nb, nb + n,
-                                                [&](const FitSample& q) {
-                                                  const double r = nrm.x() * (q.x - m.x()) +
-                                                                   nrm.y() * (q.y - m.y()) +
-                                                                   nrm.z() * (q.z - m.z());
-                                                  return r * r > limit2;
-                                                }) -
-                                 nb);
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const FitSample q = nb[k];
+      const double r = nrm.x() * (q.x - m.x()) + nrm.y() * (q.y - m.y()) + nrm.z() * (q.z - m.z());
+      if (!(r * r > limit2)) {
+        nb[kept++] = q;
+        continue;
+      }
+      const double tx = q.t * q.x, ty = q.t * q.y, tz = q.t * q.z;
+      fs.s0 -= q.t;
+      fs.sx -= tx;
+      fs.sy -= ty;
+      fs.sz -= tz;
+      fs.sxx -= tx * q.x;
+      fs.syy -= ty * q.y;
+      fs.szz -= tz * q.z;
+      fs.sxy -= tx * q.y;
+      fs.sxz -= tx * q.z;
+      fs.syz -= ty * q.z;
+    }
+    n = kept;
     if (n == before) break;
   }
   out.weight = s0_final;

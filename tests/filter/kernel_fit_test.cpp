@@ -86,6 +86,28 @@ TEST(KernelFitTest, TrimsANearOutlierFromTheFit) {
   EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
 }
 
+TEST(KernelFitTest, TrimmedFitsEqualTheDirectPcaOfTheSamplesKept) {
+  // Outliers at several distances from the plane, so that trimming takes more than one round
+  // (each round's sums are the last round's without the trimmed samples): the fit equals the
+  // direct weighted PCA of the samples it kept (the oracle).
+  const double h = 0.01;
+  std::vector<FitSample> s = plane_samples(250, h, 0.0003, 15);
+  const Eigen::Vector3d nrm = Eigen::Vector3d(0.3, -0.2, 1.0).normalized();
+  for (int k = 0; k < 6; ++k) {
+    const Eigen::Vector3d p =
+        (0.1 + 0.1 * k) * h * nrm.unitOrthogonal() + (0.05 + 0.04 * k) * h * nrm;
+    s.push_back({p.x(), p.y(), p.z(), std::pow(1 - p.squaredNorm() / (h * h), 4)});
+  }
+  const std::size_t before = s.size();
+  KernelFit fit;
+  ASSERT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), h, 8, 0.05, fit));
+  EXPECT_LT(s.size(), before);  // something was trimmed
+  const Direct ref = direct_fit(s);
+  EXPECT_NEAR(fit.weight, ref.weight, 1e-12 * ref.weight);
+  EXPECT_LT((fit.m - ref.m).norm(), 1e-12 * h);
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-10 * ref.cov.norm());
+}
+
 TEST(KernelFitTest, TooFewSamplesGiveNoFit) {
   std::vector<FitSample> s = plane_samples(7, 0.01, 0.0002, 13);
   KernelFit fit;
