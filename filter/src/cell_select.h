@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #include <vector>
 
 #include "neighbor_index.h"
@@ -56,17 +57,25 @@ class CellSelect {
   const std::uint32_t* hits() const { return hit_.data(); }
 
   //! f(slot) for each slot within r of q, in for_each_slot_within's order, through the cache
-  //! when the query takes the grid fast path, else through for_each_slot_within. f must not
+  //! when the query takes the grid fast path, else through the index's own query. f must not
   //! use this CellSelect.
   template <class F>
   void for_each_slot_within(const NeighborIndex& index, std::uint64_t key, const Eigen::Vector3f& q,
                             float r, F&& f, bool parts = true) {
+    const auto [slots, n] = slots_within(index, key, q, r, parts);
+    for (std::size_t k = 0; k < n; ++k) f(slots[k]);
+  }
+  //! The slots for_each_slot_within visits, as an array (valid until the next call) and their
+  //! count.
+  std::pair<const std::uint32_t*, std::size_t> slots_within(const NeighborIndex& index,
+                                                            std::uint64_t key,
+                                                            const Eigen::Vector3f& q, float r,
+                                                            bool parts = true) {
     const std::size_t n = select(index, key, q, r, parts);
-    if (n == kNotGrid) {
-      index.for_each_slot_within(q, r, [&](std::uint32_t s, float) { f(s); });
-      return;
-    }
-    for (std::size_t k = 0; k < n; ++k) f(hit_[k]);
+    if (n != kNotGrid) return {hit_.data(), n};
+    hit_.clear();
+    index.for_each_slot_within(q, r, [&](std::uint32_t s, float) { hit_.push_back(s); });
+    return {hit_.data(), hit_.size()};
   }
 
  private:

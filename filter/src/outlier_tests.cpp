@@ -122,17 +122,10 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
       // Without the cache's parts: on the 2.1M-point sphere at k = 250 a part served three
       // queries and cost more to make than it saved.
       const std::uint64_t cell_key = new_cell_cache_key();
-      // The points around s: their count, and a pointer to them (valid until the next call).
-      auto around = [&](std::size_t s) -> std::pair<const std::uint32_t*, std::size_t> {
-        const NeighborIndex& index = thinned ? *thinned : ridx;
-        CellSelect& sel = thread_cell_select();
-        const std::size_t n = sel.select(index, cell_key, ridx.slot_point(s), hs[s], false);
-        if (n != CellSelect::kNotGrid) return {sel.hits(), n};
-        thread_local std::vector<std::uint32_t> slots;
-        slots.clear();
-        index.for_each_slot_within(ridx.slot_point(s), hs[s],
-                                   [&](std::uint32_t a, float) { slots.push_back(a); });
-        return {slots.data(), slots.size()};
+      // The points around s: a pointer to them (valid until the next call) and their count.
+      auto around = [&](std::size_t s) {
+        return thread_cell_select().slots_within(thinned ? *thinned : ridx, cell_key,
+                                                 ridx.slot_point(s), hs[s], false);
       };
       // Displacement test: the median of the moves around s and 1.4826 x their median absolute
       // deviation (the robust standard deviation), floored at 0.02 h; none (scale 0) when fewer

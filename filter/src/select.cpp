@@ -95,10 +95,9 @@ float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
 
 namespace {
 
-void band_scalar(const float* x, const float* y, const float* z, std::size_t b, std::size_t n,
-                 const float q[3], float lo2, float hi2, std::size_t& below, float* band,
-                 std::size_t& m) {
-  for (std::size_t j = b; j < n; ++j) {
+void band_scalar(const float* x, const float* y, const float* z, std::size_t n, const float q[3],
+                 float lo2, float hi2, std::size_t& below, float* band, std::size_t& m) {
+  for (std::size_t j = 0; j < n; ++j) {
     const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
     const float d2 = dx * dx + dy * dy + dz * dz;
     below += d2 < lo2 ? 1 : 0;
@@ -139,9 +138,9 @@ void band_scalar(const float* x, const float* y, const float* z, std::size_t b, 
 }
 
 void within_scalar(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
-                   const float* lik, std::size_t b, std::size_t n, const float q[3], float r2,
-                   float lik_max, WithinCounts& out) {
-  for (std::size_t j = b; j < n; ++j) {
+                   const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
+                   WithinCounts& out) {
+  for (std::size_t j = 0; j < n; ++j) {
     const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
     const float d2 = dx * dx + dy * dy + dz * dz;
     if (!(d2 < r2)) continue;
@@ -208,9 +207,9 @@ inline float box_gap2(float x, float y, float z, const float lo[3], const float 
 
 // The kept points' coordinates, and their values of `slot` and `extra` when not null.
 void near_box_scalar(const float* x, const float* y, const float* z, const std::uint32_t* slot,
-                     const float* extra, std::size_t b, std::size_t n, const float lo[3],
-                     const float hi[3], float r2, NearBoxOut& out, std::size_t& m) {
-  for (std::size_t j = b; j < n; ++j) {
+                     const float* extra, std::size_t n, const float lo[3], const float hi[3],
+                     float r2, NearBoxOut& out, std::size_t& m) {
+  for (std::size_t j = 0; j < n; ++j) {
     out.x[m] = x[j];
     out.y[m] = y[j];
     out.z[m] = z[j];
@@ -278,7 +277,7 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
   if (have_avx2())
     band_avx2(x, y, z, n, q, lo2, hi2, below, band, m);
   else
-    band_scalar(x, y, z, 0, n, q, lo2, hi2, below, band, m);
+    band_scalar(x, y, z, n, q, lo2, hi2, below, band, m);
 }
 
 void select_near_box(const float* x, const float* y, const float* z, const std::uint32_t* slot,
@@ -287,7 +286,7 @@ void select_near_box(const float* x, const float* y, const float* z, const std::
   if (have_avx2())
     near_box_avx2(x, y, z, slot, extra, n, lo, hi, r2, out, m);
   else
-    near_box_scalar(x, y, z, slot, extra, 0, n, lo, hi, r2, out, m);
+    near_box_scalar(x, y, z, slot, extra, n, lo, hi, r2, out, m);
 }
 
 bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {
@@ -309,7 +308,7 @@ void count_within(const float* x, const float* y, const float* z, const std::uin
   if (have_avx2())
     within_avx2(x, y, z, cnt, lik, n, q, r2, lik_max, out);
   else
-    within_scalar(x, y, z, cnt, lik, 0, n, q, r2, lik_max, out);
+    within_scalar(x, y, z, cnt, lik, n, q, r2, lik_max, out);
 }
 
 }  // namespace scanclean::detail

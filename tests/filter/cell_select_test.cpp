@@ -31,6 +31,22 @@ std::vector<std::uint32_t> oracle(const NeighborIndex& index, const Eigen::Vecto
   return out;
 }
 
+// The slots of `slots` (in their order) that lie within scale sigma[t] + margin of q, in the
+// selections' float rounding: the oracle of select_within_reach on top of the radius query.
+std::vector<std::uint32_t> within_reach(const NeighborIndex& index, const Eigen::Vector3f& q,
+                                        const std::vector<std::uint32_t>& slots,
+                                        const std::vector<float>& sigma, float scale,
+                                        float margin) {
+  std::vector<std::uint32_t> out;
+  for (const std::uint32_t t : slots) {
+    const Eigen::Vector3f d = index.slot_point(t) - q;
+    const float dx = d.x(), dy = d.y(), dz = d.z(), d2 = dx * dx + dy * dy + dz * dz;
+    const float reach = scale * sigma[t] + margin;
+    if (d2 < reach * reach) out.push_back(t);
+  }
+  return out;
+}
+
 TEST(CellSelectTest, SameSlotsInTheSameOrderAsTheIndex) {
   const std::vector<Eigen::Vector3f> pts = surface_points(20000, 3);
   const float cell = 0.05f;
@@ -86,13 +102,8 @@ TEST(CellSelectTest, WithinReachKeepsTheSlotsWithinBothRadii) {
   for (std::size_t s = 0; s < a.size(); s += 53) {
     const Eigen::Vector3f q = a.slot_point(s);
     for (const float r : {0.5f * cell, 0.95f * cell}) {
-      std::vector<std::uint32_t> want;
-      a.for_each_slot_within(q, r, [&](std::uint32_t t, float) {
-        const Eigen::Vector3f d = a.slot_point(t) - q;
-        const float dx = d.x(), dy = d.y(), dz = d.z(), d2 = dx * dx + dy * dy + dz * dz;
-        const float reach = scale * sigma[t] + margin;
-        if (d2 < reach * reach) want.push_back(t);
-      });
+      const std::vector<std::uint32_t> want =
+          within_reach(a, q, oracle(a, q, r), sigma, scale, margin);
       const std::size_t n = sel.select_within_reach(
           a, key, q, r, [&](std::uint32_t t) { return sigma[t]; }, scale, margin);
       ASSERT_NE(n, CellSelect::kNotGrid);
@@ -134,13 +145,7 @@ TEST(CellSelectTest, PartsGiveTheSlotsOfTheWholeNeighbourhood) {
     const std::size_t m = whole.select(a, key, q, r, false);
     ASSERT_EQ(m, n);
     if (s % 2 == 0) {
-      std::vector<std::uint32_t> reach_want;
-      for (const std::uint32_t t : want) {
-        const Eigen::Vector3f d = a.slot_point(t) - q;
-        const float dx = d.x(), dy = d.y(), dz = d.z(), d2 = dx * dx + dy * dy + dz * dz;
-        const float reach = scale * sigma[t] + margin;
-        if (d2 < reach * reach) reach_want.push_back(t);
-      }
+      const std::vector<std::uint32_t> reach_want = within_reach(a, q, want, sigma, scale, margin);
       const std::size_t k = sel.select_within_reach(
           a, key, q, r, [&](std::uint32_t t) { return sigma[t]; }, scale, margin);
       ASSERT_EQ(std::vector<std::uint32_t>(sel.hits(), sel.hits() + k), reach_want) << "slot " << s;
