@@ -79,6 +79,92 @@ FitSums sums_sse2(const FitSample* q, std::size_t n) {
   return sums_impl(q, n);
 }
 
+// One trimming pass (trim_samples): sample k is kept when !(r r > limit2), with its residual
+// r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z); the kept ones move down in order, the
+// others' terms leave the sums. Four samples at a time: their residuals are formed in a vector,
+// with the scalar loop's operations (no fused multiply-add), and a block with none trimmed is
+// kept whole; so the results are the scalar loop's, bit for bit.
+[[gnu::always_inline]] inline void downdate(FitSums& fs, const FitSample& q) {
+  const double tx = q.t * q.x, ty = q.t * q.y, tz = q.t * q.z;
+  fs.s0 -= q.t;
+  fs.sx -= tx;
+  fs.sy -= ty;
+  fs.sz -= tz;
+  fs.sxx -= tx * q.x;
+  fs.syy -= ty * q.y;
+  fs.szz -= tz * q.z;
+  fs.sxy -= tx * q.y;
+  fs.sxz -= tx * q.z;
+  fs.syz -= ty * q.z;
+}
+
+[[gnu::always_inline]] inline double residual(const FitSample& q, const TrimPlane& p) {
+  return p.n[0] * (q.x - p.m[0]) + p.n[1] * (q.y - p.m[1]) + p.n[2] * (q.z - p.m[2]);
+}
+
+[[gnu::always_inline]] inline std::size_t trim_impl(FitSample* q, std::size_t n, const TrimPlane& p,
+                                                    FitSums& fs) {
+  const V4d nx = {p.n[0], p.n[0], p.n[0], p.n[0]}, ny = {p.n[1], p.n[1], p.n[1], p.n[1]},
+            nz = {p.n[2], p.n[2], p.n[2], p.n[2]};
+  const V4d mx = {p.m[0], p.m[0], p.m[0], p.m[0]}, my = {p.m[1], p.m[1], p.m[1], p.m[1]},
+            mz = {p.m[2], p.m[2], p.m[2], p.m[2]};
+  const V4d lim = {p.limit2, p.limit2, p.limit2, p.limit2};
+  // The mask of the samples of block k to trim (bit l: sample k + l); r0..r3 its rows.
+  auto block = [&](std::size_t k, V4d& r0, V4d& r1, V4d& r2, V4d& r3) {
+    std::memcpy(&r0, &q[k], sizeof r0);
+    std::memcpy(&r1, &q[k + 1], sizeof r1);
+    std::memcpy(&r2, &q[k + 2], sizeof r2);
+    std::memcpy(&r3, &q[k + 3], sizeof r3);
+    const V4d a = __builtin_shuffle(r0, r1, V4l{0, 4, 2, 6});  // x0 x1 z0 z1
+    const V4d b = __builtin_shuffle(r0, r1, V4l{1, 5, 3, 7});  // y0 y1 t0 t1
+    const V4d c = __builtin_shuffle(r2, r3, V4l{0, 4, 2, 6});  // x2 x3 z2 z3
+    const V4d d = __builtin_shuffle(r2, r3, V4l{1, 5, 3, 7});  // y2 y3 t2 t3
+    const V4d x = __builtin_shuffle(a, c, V4l{0, 1, 4, 5});
+    const V4d y = __builtin_shuffle(b, d, V4l{0, 1, 4, 5});
+    const V4d z = __builtin_shuffle(a, c, V4l{2, 3, 6, 7});
+    const V4d r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
+    const V4l out = r * r > lim;
+    return static_cast<unsigned>((out[0] & 1) | (out[1] & 2) | (out[2] & 4) | (out[3] & 8));
+  };
+  std::size_t k = 0;
+  V4d r[4];
+  unsigned mask = 0;
+  // Up to the first block with a sample to trim, nothing moves.
+  for (; k + 4 <= n; k += 4)
+    if ((mask = block(k, r[0], r[1], r[2], r[3])) != 0) break;
+  std::size_t kept = k;
+  bool loaded = k + 4 <= n;  // block k is in r and mask already
+  for (; k + 4 <= n; k += 4) {
+    if (!loaded) mask = block(k, r[0], r[1], r[2], r[3]);
+    loaded = false;
+    for (int l = 0; l < 4; ++l) {
+      if (mask & (1u << l)) {
+        downdate(fs, q[k + l]);
+      } else {
+        std::memcpy(&q[kept++], &r[l], sizeof r[l]);
+      }
+    }
+  }
+  for (; k < n; ++k) {
+    const FitSample s = q[k];
+    const double e = residual(s, p);
+    if (!(e * e > p.limit2))
+      q[kept++] = s;
+    else
+      downdate(fs, s);
+  }
+  return kept;
+}
+
+// AVX2 without FMA, as the sums.
+[[gnu::target("avx2")]] std::size_t trim_avx2(FitSample* q, std::size_t n, const TrimPlane& p,
+                                              FitSums& fs) {
+  return trim_impl(q, n, p, fs);
+}
+std::size_t trim_sse2(FitSample* q, std::size_t n, const TrimPlane& p, FitSums& fs) {
+  return trim_impl(q, n, p, fs);
+}
+
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2");
   return yes;
@@ -88,6 +174,24 @@ bool have_avx2() {
 
 FitSums fit_sums(const FitSample* samples, std::size_t n) {
   return have_avx2() ? sums_avx2(samples, n) : sums_sse2(samples, n);
+}
+
+std::size_t trim_samples(FitSample* samples, std::size_t n, const TrimPlane& plane, FitSums& sums) {
+  return have_avx2() ? trim_avx2(samples, n, plane, sums) : trim_sse2(samples, n, plane, sums);
+}
+
+std::size_t trim_samples_scalar(FitSample* samples, std::size_t n, const TrimPlane& plane,
+                                FitSums& sums) {
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const FitSample q = samples[k];
+    const double r = residual(q, plane);
+    if (!(r * r > plane.limit2))
+      samples[kept++] = q;
+    else
+      downdate(sums, q);
+  }
+  return kept;
 }
 
 FitSums fit_sums_scalar(const FitSample* samples, std::size_t n) {
@@ -159,26 +263,8 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
     const double var = std::max(es.eigenvalues()[0], floor2);
     const double limit2 = kTrim * kTrim * var * h2;
     const std::size_t before = n;
-    std::size_t kept = 0;
-    for (std::size_t k = 0; k < n; ++k) {
-      const FitSample q = nb[k];
-      const double r = nrm.x() * (q.x - m.x()) + nrm.y() * (q.y - m.y()) + nrm.z() * (q.z - m.z());
-      if (!(r * r > limit2)) {
-        nb[kept++] = q;
-        continue;
-      }
-      const double tx = q.t * q.x, ty = q.t * q.y, tz = q.t * q.z;
-      fs.s0 -= q.t;
-      fs.sx -= tx;
-      fs.sy -= ty;
-      fs.sz -= tz;
-      fs.sxx -= tx * q.x;
-      fs.syy -= ty * q.y;
-      fs.szz -= tz * q.z;
-      fs.sxy -= tx * q.y;
-      fs.sxz -= tx * q.z;
-      fs.syz -= ty * q.z;
-    }
+    const TrimPlane plane{{nrm.x(), nrm.y(), nrm.z()}, {m.x(), m.y(), m.z()}, limit2};
+    const std::size_t kept = trim_samples(nb, n, plane, fs);
     n = kept;
     if (n == before) break;
   }

@@ -42,6 +42,21 @@ FitSums fit_sums(const FitSample* samples, std::size_t n);
 //! The scalar reference of fit_sums (tests).
 FitSums fit_sums_scalar(const FitSample* samples, std::size_t n);
 
+//! One trimming pass of the fit: the plane (unit normal n through m, offsets as the samples')
+//! and the squared residual beyond which a sample is trimmed.
+struct TrimPlane {
+  double n[3], m[3];
+  double limit2;
+};
+//! Keeps the samples whose residual r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z) has
+//! !(r r > limit2), moved down in order; takes the others' terms out of `sums` (the fit_sums
+//! products, in sample order). Returns the count kept. Vectorised (four samples a lane when
+//! the CPU has AVX2), with the scalar loop's operations: its results bit for bit.
+std::size_t trim_samples(FitSample* samples, std::size_t n, const TrimPlane& plane, FitSums& sums);
+//! The scalar reference of trim_samples (tests).
+std::size_t trim_samples_scalar(FitSample* samples, std::size_t n, const TrimPlane& plane,
+                                FitSums& sums);
+
 //! The weighted PCA of `samples` around the centre point `centre` (eq. 2), repeated without the
 //! samples farther than 3 standard deviations from its plane (sqrt of lambda_3, at least the
 //! eigenvalue floor eigen_floor h), at most twice. A near outlier would otherwise stretch the

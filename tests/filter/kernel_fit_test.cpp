@@ -136,5 +136,63 @@ TEST(KernelFitTest, VectorSumsEqualTheScalarLoopBitForBit) {
   }
 }
 
+TEST(KernelFitTest, VectorTrimmingEqualsTheScalarLoopBitForBit) {
+  // A plane with some samples far off it, at the start, in the middle, in the last block and in
+  // the tail past the last multiple of four: the same samples kept, in the same order, and the
+  // same sums left, bit for bit.
+  std::mt19937 rng(16);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const int n : {0, 3, 4, 9, 64, 251}) {
+    for (const int pattern : {0, 1, 2}) {
+      std::vector<FitSample> s;
+      for (int k = 0; k < n; ++k) {
+        const bool off =
+            (pattern == 1 && (k == 0 || k == n / 2 || k == n - 1)) || (pattern == 2 && k % 3 == 1);
+        const double z = (off ? 0.05 : 0.0) + 1e-3 * u(rng);
+        s.push_back({0.1 * u(rng), 0.1 * u(rng), z, std::pow(0.5 + 0.5 * u(rng), 4)});
+      }
+      const TrimPlane plane{{0.01, -0.02, 0.9997499}, {1e-4, -2e-4, 3e-4}, 9 * 1e-6};
+      std::vector<FitSample> v = s, r = s;
+      FitSums vs = fit_sums_scalar(s.data(), s.size()), rs = vs;
+      const std::size_t nv = trim_samples(v.data(), v.size(), plane, vs);
+      const std::size_t nr = trim_samples_scalar(r.data(), r.size(), plane, rs);
+      ASSERT_EQ(nv, nr) << "n " << n << ", pattern " << pattern;
+      if (pattern == 1 && n > 0) {
+        EXPECT_LT(nr, s.size());
+      }
+      for (std::size_t k = 0; k < nr; ++k) {
+        EXPECT_EQ(v[k].x, r[k].x);
+        EXPECT_EQ(v[k].y, r[k].y);
+        EXPECT_EQ(v[k].z, r[k].z);
+        EXPECT_EQ(v[k].t, r[k].t);
+      }
+      const double a[10] = {vs.s0,  vs.sx,  vs.sy,  vs.sz,  vs.sxx,
+                            vs.syy, vs.szz, vs.sxy, vs.sxz, vs.syz};
+      const double b[10] = {rs.s0,  rs.sx,  rs.sy,  rs.sz,  rs.sxx,
+                            rs.syy, rs.szz, rs.sxy, rs.sxz, rs.syz};
+      for (int f = 0; f < 10; ++f) EXPECT_EQ(a[f], b[f]) << "n " << n << ", sum " << f;
+    }
+  }
+}
+
+TEST(KernelFitTest, TrimmingKeepsExactlyTheSamplesWithinTheLimit) {
+  // The oracle: the residual of each sample against the plane, formed directly.
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<FitSample> s;
+  for (int k = 0; k < 203; ++k) s.push_back({u(rng), u(rng), 0.1 * u(rng), 1.0});
+  const TrimPlane plane{{0, 0, 1}, {0, 0, 0.01}, 0.05 * 0.05};
+  std::vector<FitSample> expect;
+  for (const FitSample& q : s)
+    if (std::abs(q.z - 0.01) <= 0.05) expect.push_back(q);
+  FitSums sums = fit_sums_scalar(s.data(), s.size());
+  std::vector<FitSample> v = s;
+  const std::size_t kept = trim_samples(v.data(), v.size(), plane, sums);
+  ASSERT_EQ(kept, expect.size());
+  ASSERT_LT(kept, s.size());
+  for (std::size_t k = 0; k < kept; ++k) EXPECT_EQ(v[k].z, expect[k].z);
+  EXPECT_NEAR(sums.s0, static_cast<double>(kept), 1e-9);
+}
+
 }  // namespace
 }  // namespace scanclean::detail
