@@ -165,6 +165,63 @@ std::size_t trim_sse2(FitSample* q, std::size_t n, const TrimPlane& p, FitSums& 
   return trim_impl(q, n, p, fs);
 }
 
+[[gnu::always_inline]] inline std::size_t make_impl(const Eigen::Vector3d* p,
+                                                    const std::uint32_t* js, std::size_t m,
+                                                    const Eigen::Vector3d& c, double h2,
+                                                    double inv_h2, FitSample* out) {
+  const V4d cx = {c.x(), c.x(), c.x(), c.x()}, cy = {c.y(), c.y(), c.y(), c.y()},
+            cz = {c.z(), c.z(), c.z(), c.z()};
+  const V4d vh2 = {h2, h2, h2, h2}, vinv = {inv_h2, inv_h2, inv_h2, inv_h2};
+  const V4d one = {1, 1, 1, 1};
+  std::size_t n = 0, k = 0;
+  for (; k + 4 <= m; k += 4) {
+    const Eigen::Vector3d& a = p[js[k]];
+    const Eigen::Vector3d& b = p[js[k + 1]];
+    const Eigen::Vector3d& e = p[js[k + 2]];
+    const Eigen::Vector3d& f = p[js[k + 3]];
+    const V4d dx = V4d{a.x(), b.x(), e.x(), f.x()} - cx;
+    const V4d dy = V4d{a.y(), b.y(), e.y(), f.y()} - cy;
+    const V4d dz = V4d{a.z(), b.z(), e.z(), f.z()} - cz;
+    const V4d r2 = (dx * dx + dy * dy) + dz * dz;
+    const V4l in = r2 < vh2;
+    V4d t = one - r2 * vinv;
+    t *= t;
+    t *= t;
+    // Rows (dx dy dz t) of the four samples; each is written at out[n] and counted if kept.
+    const V4d lo0 = __builtin_shuffle(dx, dy, V4l{0, 4, 2, 6});  // dx0 dy0 dx2 dy2
+    const V4d lo1 = __builtin_shuffle(dx, dy, V4l{1, 5, 3, 7});  // dx1 dy1 dx3 dy3
+    const V4d hi0 = __builtin_shuffle(dz, t, V4l{0, 4, 2, 6});   // dz0 t0 dz2 t2
+    const V4d hi1 = __builtin_shuffle(dz, t, V4l{1, 5, 3, 7});   // dz1 t1 dz3 t3
+    const V4d rows[4] = {
+        __builtin_shuffle(lo0, hi0, V4l{0, 1, 4, 5}), __builtin_shuffle(lo1, hi1, V4l{0, 1, 4, 5}),
+        __builtin_shuffle(lo0, hi0, V4l{2, 3, 6, 7}), __builtin_shuffle(lo1, hi1, V4l{2, 3, 6, 7})};
+    for (int l = 0; l < 4; ++l) {
+      std::memcpy(&out[n], &rows[l], sizeof rows[l]);
+      n += in[l] != 0 ? 1 : 0;
+    }
+  }
+  for (; k < m; ++k) {
+    const Eigen::Vector3d dj = p[js[k]] - c;
+    const double r2 = (dj.x() * dj.x() + dj.y() * dj.y()) + dj.z() * dj.z();
+    if (!(r2 < h2)) continue;
+    double t = 1.0 - r2 * inv_h2;
+    t *= t;
+    t *= t;
+    out[n++] = {dj.x(), dj.y(), dj.z(), t};
+  }
+  return n;
+}
+
+[[gnu::target("avx2")]] std::size_t make_avx2(const Eigen::Vector3d* p, const std::uint32_t* js,
+                                              std::size_t m, const Eigen::Vector3d& c, double h2,
+                                              double inv_h2, FitSample* out) {
+  return make_impl(p, js, m, c, h2, inv_h2, out);
+}
+std::size_t make_sse2(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                      const Eigen::Vector3d& c, double h2, double inv_h2, FitSample* out) {
+  return make_impl(p, js, m, c, h2, inv_h2, out);
+}
+
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2");
   return yes;
@@ -174,6 +231,28 @@ bool have_avx2() {
 
 FitSums fit_sums(const FitSample* samples, std::size_t n) {
   return have_avx2() ? sums_avx2(samples, n) : sums_sse2(samples, n);
+}
+
+std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                         const Eigen::Vector3d& centre, double h2, double inv_h2, FitSample* out) {
+  return have_avx2() ? make_avx2(p, js, m, centre, h2, inv_h2, out)
+                     : make_sse2(p, js, m, centre, h2, inv_h2, out);
+}
+
+std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                                const Eigen::Vector3d& centre, double h2, double inv_h2,
+                                FitSample* out) {
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < m; ++k) {
+    const Eigen::Vector3d dj = p[js[k]] - centre;
+    const double r2 = dj.squaredNorm();
+    if (!(r2 < h2)) continue;
+    double t = 1.0 - r2 * inv_h2;
+    t *= t;
+    t *= t;
+    out[n++] = {dj.x(), dj.y(), dj.z(), t};
+  }
+  return n;
 }
 
 std::size_t trim_samples(FitSample* samples, std::size_t n, const TrimPlane& plane, FitSums& sums) {

@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "point_set.h"
@@ -57,6 +58,17 @@ std::size_t trim_samples(FitSample* samples, std::size_t n, const TrimPlane& pla
 std::size_t trim_samples_scalar(FitSample* samples, std::size_t n, const TrimPlane& plane,
                                 FitSums& sums);
 
+//! The samples of the points p[js[k]], k < m, within h of `centre` (r2 < h2), in order: offset
+//! p[j] - centre, r2 = (dx dx + dy dy) + dz dz, chi weight t = 1 - r2 inv_h2 squared twice.
+//! Writes them to out (room for m) and returns their count. Four points at a time when the CPU
+//! has AVX2, with the scalar loop's operations (no fused multiply-add): its results bit for bit.
+std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                         const Eigen::Vector3d& centre, double h2, double inv_h2, FitSample* out);
+//! The scalar reference of make_samples (tests).
+std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                                const Eigen::Vector3d& centre, double h2, double inv_h2,
+                                FitSample* out);
+
 //! The weighted PCA of `samples` around the centre point `centre` (eq. 2), repeated without the
 //! samples farther than 3 standard deviations from its plane (sqrt of lambda_3, at least the
 //! eigenvalue floor eigen_floor h), at most twice. A near outlier would otherwise stretch the
@@ -101,21 +113,42 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
   thread_local std::vector<FitSample> buf;
   FitSample* nb = buf.data();
   std::size_t n = 0, cap = buf.size();
-  visit([&](std::size_t j) {
-    const Eigen::Vector3d dj = d.p[j] - pi;
-    const double r2 = dj.squaredNorm();
-    if (!(r2 < h2)) return;
-    if (use_dir && !(d.v[j].dot(vi) > 0.5f)) return;
-    double t = 1.0 - r2 * inv_h2;
-    t *= t;
-    t *= t;
-    if (n == cap) {
-      buf.resize(std::max<std::size_t>(256, 2 * cap));
-      nb = buf.data();
-      cap = buf.size();
-    }
-    nb[n++] = {dj.x(), dj.y(), dj.z(), t};
-  });
+  if (use_dir) {
+    visit([&](std::size_t j) {
+      const Eigen::Vector3d dj = d.p[j] - pi;
+      const double r2 = dj.squaredNorm();
+      if (!(r2 < h2)) return;
+      if (!(d.v[j].dot(vi) > 0.5f)) return;
+      double t = 1.0 - r2 * inv_h2;
+      t *= t;
+      t *= t;
+      if (n == cap) {
+        buf.resize(std::max<std::size_t>(256, 2 * cap));
+        nb = buf.data();
+        cap = buf.size();
+      }
+      nb[n++] = {dj.x(), dj.y(), dj.z(), t};
+    });
+  } else {
+    // The neighbours' indices in blocks, made into samples a block at a time (make_samples).
+    constexpr std::size_t kBlock = 64;
+    std::uint32_t js[kBlock];
+    std::size_t m = 0;
+    auto flush = [&] {
+      if (n + m > cap) {
+        buf.resize(std::max<std::size_t>(256, 2 * (n + m)));
+        nb = buf.data();
+        cap = buf.size();
+      }
+      n += make_samples(d.p.data(), js, m, pi, h2, inv_h2, nb + n);
+      m = 0;
+    };
+    visit([&](std::size_t j) {
+      js[m++] = static_cast<std::uint32_t>(j);
+      if (m == kBlock) flush();
+    });
+    flush();
+  }
   if (untrimmed) untrimmed->assign(nb, nb + n);
   if (!fit_samples(nb, n, pi, h, k_min, eigen_floor, out)) return false;
   out.n = kernel_normal(out, use_dir, d.v_orients_only, vi);

@@ -136,6 +136,39 @@ TEST(KernelFitTest, VectorSumsEqualTheScalarLoopBitForBit) {
   }
 }
 
+TEST(KernelFitTest, VectorSamplesEqualTheScalarLoopBitForBit) {
+  // Points around a centre far from the origin, some beyond h, picked in a scrambled order: the
+  // same samples, in the same order, bit for bit.
+  std::mt19937 rng(18);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Eigen::Vector3d centre(31.7, -12.25, 4.5);
+  const double h = 0.02;
+  std::vector<Eigen::Vector3d> p;
+  for (int k = 0; k < 300; ++k)
+    p.push_back(centre + 0.025 * Eigen::Vector3d(u(rng), u(rng), u(rng)));
+  for (const std::size_t m : {0, 1, 4, 7, 64, 299}) {
+    std::vector<std::uint32_t> js(m);
+    for (std::size_t k = 0; k < m; ++k) js[k] = static_cast<std::uint32_t>((k * 37) % p.size());
+    std::vector<FitSample> v(m), r(m);
+    const std::size_t nv =
+        make_samples(p.data(), js.data(), m, centre, h * h, 1 / (h * h), v.data());
+    const std::size_t nr =
+        make_samples_scalar(p.data(), js.data(), m, centre, h * h, 1 / (h * h), r.data());
+    ASSERT_EQ(nv, nr) << "m " << m;
+    if (m >= 64) {
+      EXPECT_GT(nr, 0u);
+      EXPECT_LT(nr, m);
+    }
+    for (std::size_t k = 0; k < nr; ++k) {
+      EXPECT_EQ(v[k].x, r[k].x);
+      EXPECT_EQ(v[k].y, r[k].y);
+      EXPECT_EQ(v[k].z, r[k].z);
+      EXPECT_EQ(v[k].t, r[k].t);
+      EXPECT_LT(std::sqrt(r[k].x * r[k].x + r[k].y * r[k].y + r[k].z * r[k].z), h * (1 + 1e-12));
+    }
+  }
+}
+
 TEST(KernelFitTest, VectorTrimmingEqualsTheScalarLoopBitForBit) {
   // A plane with some samples far off it, at the start, in the middle, in the last block and in
   // the tail past the last multiple of four: the same samples kept, in the same order, and the
