@@ -1,7 +1,9 @@
 #include "kernel_fit.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 namespace scanclean::detail {
@@ -229,6 +231,50 @@ bool have_avx2() {
 
 }  // namespace
 
+bool smallest_eigenpair(const Eigen::Matrix3d& c, double& lambda, Eigen::Vector3d& v) {
+  // The characteristic polynomial f(l) = l^3 - a l^2 + b l - d has three real roots. Left of
+  // the smallest, f is negative, increasing and concave (f'' = 6 l - 2 a vanishes at the roots'
+  // mean), so Newton's method started there climbs to it from below without passing it; it
+  // stops when a step no longer moves l up.
+  const double c00 = c(0, 0), c11 = c(1, 1), c22 = c(2, 2);
+  const double c01 = c(0, 1), c02 = c(0, 2), c12 = c(1, 2);
+  const double a = c00 + c11 + c22;
+  const double b = (c00 * c11 - c01 * c01) + (c00 * c22 - c02 * c02) + (c11 * c22 - c12 * c12);
+  const double d =
+      c00 * (c11 * c22 - c12 * c12) - c01 * (c01 * c22 - c12 * c02) + c02 * (c01 * c12 - c11 * c02);
+  const double r01 = std::abs(c01), r02 = std::abs(c02), r12 = std::abs(c12);
+  // Gershgorin: every eigenvalue lies above min_i (c_ii - sum_j |c_ij|).
+  double l = std::min({c00 - r01 - r02, c11 - r01 - r12, c22 - r02 - r12});
+  const double scale = std::max({std::abs(c00), std::abs(c11), std::abs(c22), r01, r02, r12});
+  if (!(scale > 0) || !std::isfinite(a + b + d + l)) return false;
+  l -= 1e-3 * scale;  // strictly left of the smallest root
+  for (int it = 0; it < 100; ++it) {
+    const double f = ((l - a) * l + b) * l - d;
+    const double df = (3 * l - 2 * a) * l + b;
+    if (!(f < 0) || !(df > 0)) break;  // at the root, to rounding
+    const double next = l - f / df;
+    if (!(next > l)) break;
+    l = next;
+  }
+  // The other two roots: l2 + l3 = a - l, l2 l3 = b - l (a - l). Closer to l than 1e-3 of the
+  // largest entry, Newton's method slows down and the eigenvector is ill-determined: leave
+  // those to the full solver.
+  const double p = a - l, q = b - l * p;
+  const double disc = std::max(0.0, p * p - 4 * q);
+  const double l2 = 0.5 * (p - std::sqrt(disc));
+  if (!(l2 - l > 1e-3 * scale)) return false;
+  // The eigenvector: the largest cross product of two rows of c - l I.
+  const Eigen::Vector3d r0(c00 - l, c01, c02), r1(c01, c11 - l, c12), r2(c02, c12, c22 - l);
+  const Eigen::Vector3d x0 = r0.cross(r1), x1 = r0.cross(r2), x2 = r1.cross(r2);
+  const double n0 = x0.squaredNorm(), n1 = x1.squaredNorm(), n2 = x2.squaredNorm();
+  const Eigen::Vector3d& best = n0 >= n1 && n0 >= n2 ? x0 : (n1 >= n2 ? x1 : x2);
+  const double nb = std::max({n0, n1, n2});
+  if (!(nb > 0)) return false;
+  lambda = l;
+  v = best / std::sqrt(nb);
+  return true;
+}
+
 FitSums fit_sums(const FitSample* samples, std::size_t n) {
   return have_avx2() ? sums_avx2(samples, n) : sums_sse2(samples, n);
 }
@@ -335,11 +381,17 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
     c(1, 2) = c(2, 1) = syz / s0 - m.y() * m.z();
     // Solve in units of h^2 (well scaled); closed form, checked against the QR solver in tests.
     cov = c * inv_h2;
-    es.computeDirect(cov);
     if (round == kRefits) break;
-    // Trim (in units of h): residuals from the plane beyond kTrim standard deviations.
-    const Eigen::Vector3d nrm = es.eigenvectors().col(0);
-    const double var = std::max(es.eigenvalues()[0], floor2);
+    // Trim (in units of h): residuals from the plane beyond kTrim standard deviations. The plane
+    // needs only the smallest eigenpair; the full solve is left to the last round.
+    Eigen::Vector3d nrm;
+    double lambda0;
+    if (!smallest_eigenpair(cov, lambda0, nrm)) {
+      es.computeDirect(cov);
+      nrm = es.eigenvectors().col(0);
+      lambda0 = es.eigenvalues()[0];
+    }
+    const double var = std::max(lambda0, floor2);
     const double limit2 = kTrim * kTrim * var * h2;
     const std::size_t before = n;
     const TrimPlane plane{{nrm.x(), nrm.y(), nrm.z()}, {m.x(), m.y(), m.z()}, limit2};
@@ -347,6 +399,7 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
     n = kept;
     if (n == before) break;
   }
+  es.computeDirect(cov);
   out.weight = s0_final;
   out.m = m;
   out.cov = cov * h2;
