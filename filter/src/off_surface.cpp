@@ -1,9 +1,12 @@
 #include "off_surface.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <utility>
+
+#include "kernel_fit.h"
 
 namespace scanclean::detail {
 
@@ -16,6 +19,24 @@ bool downdate_fit(Eigen::Vector3d& m, Eigen::Matrix3d& cov, double& w, const Eig
   cov = (w / w1) * cov - (t * w / (w1 * w1)) * delta * delta.transpose();
   w = w1;
   return true;
+}
+
+void floored_mahalanobis(const Eigen::Matrix3d& c, const Eigen::Vector3d& y, double floor2,
+                         double& e, double& y0) {
+  Eigen::Vector3d n0;
+  double l0 = 0;
+  if (smallest_eigenpair(c, l0, n0) && l0 >= floor2) {
+    // No eigenvalue is below the floor: S is c itself.
+    e = y.dot(c.inverse() * y);
+    y0 = n0.dot(y);
+    return;
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(c);
+  const Eigen::Vector3d yl = es.eigenvectors().transpose() * y;
+  e = 0;
+  for (int k = 0; k < 3; ++k) e += yl[k] * yl[k] / std::max(es.eigenvalues()[k], floor2);
+  y0 = yl[0];
 }
 
 bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vector3d& xl,
@@ -40,10 +61,16 @@ bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vect
     const bool is_centre = r2 == 0.0;
     const double t_bound = (normals_agree && r2 < h2 ? 1.0 : 0.0) + (is_centre ? 0.0 : 1.0);
     if (t_bound <= 0.1 * w && e[j] <= 0.25f * test.threshold2) return true;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-    es.computeDirect(cov / h2);
-    const Eigen::Vector3d n0 = es.eigenvectors().col(0);
-    const double band2 = 9.0 * std::max(es.eigenvalues()[0], test.floor2) * h2;
+    // The fit's plane (its smallest eigenpair) decides whether the two points are in it.
+    Eigen::Vector3d n0;
+    double l0 = 0;
+    if (!smallest_eigenpair(cov / h2, l0, n0)) {
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+      es.computeDirect(cov / h2);
+      n0 = es.eigenvectors().col(0);
+      l0 = es.eigenvalues()[0];
+    }
+    const double band2 = 9.0 * std::max(l0, test.floor2) * h2;
     auto weight_in_fit = [&](const Eigen::Vector3d& p) {
       const double pr2 = p.squaredNorm();
       if (!(pr2 < h2)) return 0.0;
@@ -56,7 +83,7 @@ bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vect
     const double t_point = normals_agree ? weight_in_fit(d0) : 0.0;
     const double t_centre = is_centre ? 0.0 : weight_in_fit(Eigen::Vector3d::Zero());
     if (t_point + t_centre <= 0.1 * w && e[j] <= 0.25f * test.threshold2) return true;
-    bool ok = true, downdated = false;
+    bool ok = true;
     const double min_weight = 1e-3 * fit.weight;
     for (const auto& [p, t] :
          {std::pair{d0, t_point}, std::pair{Eigen::Vector3d(0, 0, 0), t_centre}}) {
@@ -65,15 +92,12 @@ bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vect
         ok = false;
         break;
       }
-      downdated = true;
     }
     if (!ok) continue;
-    if (downdated) es.computeDirect(cov / h2);           // else the fit is the one solved above
     const Eigen::Vector3d y = (d0 - m) / std::sqrt(h2);  // in units of h
-    const Eigen::Vector3d yl = es.eigenvectors().transpose() * y;
-    double e1 = 0;
-    for (int k = 0; k < 3; ++k) e1 += yl[k] * yl[k] / std::max(es.eigenvalues()[k], test.floor2);
-    if (e1 <= test.threshold2 && yl[0] * yl[0] * h2 < buf.f[B::kSlab2][j]) return true;
+    double e1 = 0, y0 = 0;
+    floored_mahalanobis(cov / h2, y, test.floor2, e1, y0);
+    if (e1 <= test.threshold2 && y0 * y0 * h2 < buf.f[B::kSlab2][j]) return true;
   }
   return false;
 }

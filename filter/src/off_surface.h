@@ -30,6 +30,13 @@ struct OffSurfaceTest {
 bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vector3d& xl,
              const Eigen::Vector3f& nref);
 
+//! The Mahalanobis e = y^T S^-1 y of y under the covariance c with its eigenvalues floored at
+//! floor2 (as the kernels' are), and y's component y0 along c's smallest eigenvector (sign
+//! arbitrary). Without an eigenvalue below the floor, through c's inverse; else through its
+//! eigen-decomposition.
+void floored_mahalanobis(const Eigen::Matrix3d& c, const Eigen::Vector3d& y, double floor2,
+                         double& e, double& y0);
+
 //! Takes one sample (offset p from the centre point, chi weight t) out of a weighted fit with
 //! mean offset m, covariance cov (m^2) and total weight w, in closed form: afterwards they are
 //! the fit without it. Returns false, changing nothing, unless more than min_weight remains.

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <random>
 
 #include "../../filter/src/kernel_fit.h"
@@ -58,6 +60,35 @@ TEST(OffSurfaceTest, DowndateEqualsAFullRefitWithoutThePoints) {
       EXPECT_LT((fit.cov - ref.cov).norm(), 1e-10 * ref.cov.norm()) << "trial " << trial;
     }
   }
+}
+
+TEST(OffSurfaceTest, FlooredMahalanobisEqualsTheEigenDecomposition) {
+  // The oracle: y in the eigenbasis of Eigen's iterative solver, each component over its
+  // eigenvalue floored. Covariances with no eigenvalue under the floor (the inverse path) and
+  // with the normal one under it (the decomposition path).
+  std::mt19937 rng(22);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double floor2 = 0.05 * 0.05;
+  int floored = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const Eigen::Matrix3d rot =
+        Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
+    const double l0 = trial % 2 == 0 ? 0.01 * (1.5 + u(rng)) : 1e-3 * (1.5 + u(rng));
+    const Eigen::Vector3d ev(l0, 0.08 + 0.02 * u(rng), 0.12 + 0.02 * u(rng));
+    const Eigen::Matrix3d c = rot * ev.asDiagonal() * rot.transpose();
+    const Eigen::Vector3d y(u(rng), u(rng), u(rng));
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(c);
+    const Eigen::Vector3d yl = ref.eigenvectors().transpose() * y;
+    double want = 0;
+    for (int k = 0; k < 3; ++k) want += yl[k] * yl[k] / std::max(ref.eigenvalues()[k], floor2);
+    floored += ref.eigenvalues()[0] < floor2 ? 1 : 0;
+    double e = 0, y0 = 0;
+    floored_mahalanobis(c, y, floor2, e, y0);
+    EXPECT_NEAR(e, want, 1e-12 * want) << "trial " << trial;
+    EXPECT_NEAR(std::abs(y0), std::abs(yl[0]), 1e-12) << "trial " << trial;
+  }
+  EXPECT_GT(floored, 100);
+  EXPECT_LT(floored, 300);
 }
 
 TEST(OffSurfaceTest, DowndateRefusesToEmptyTheFit) {
