@@ -45,9 +45,9 @@ FitSums fit_sums_scalar(const FitSample* samples, std::size_t n);
 
 //! The smallest eigenvalue of the symmetric c and a unit eigenvector of it, by Newton's method
 //! on the characteristic polynomial from below (a few steps; no trigonometry), the vector from
-//! the rows of c - lambda I. Returns false, and leaves the outputs alone, when the two smallest
-//! eigenvalues are within 1e-3 of c's largest entry (the vector is then ill-determined) or c is
-//! zero or not finite.
+//! the rows of c - lambda I. Returns false, and leaves the outputs alone, where that is slow or
+//! ill-determined: the two smallest eigenvalues within a factor of about 2 of each other, or
+//! within 1e-3 of c's largest entry; c zero or not finite.
 bool smallest_eigenpair(const Eigen::Matrix3d& c, double& lambda, Eigen::Vector3d& v);
 
 //! One trimming pass of the fit: the plane (unit normal n through m, offsets as the samples')

@@ -154,25 +154,27 @@ TEST(KernelFitTest, SmallestEigenpairMatchesTheIterativeSolver) {
     const double scale = c.cwiseAbs().maxCoeff();
     double lambda = 0;
     Eigen::Vector3d v;
+    const double ratio = ref.eigenvalues()[0] / ref.eigenvalues()[1];
     if (!smallest_eigenpair(c, lambda, v)) {
-      // Only the nearly equal smallest pairs are left to the full solver.
-      EXPECT_LT(gap, 2e-3 * scale) << "trial " << trial;
+      // Only smallest pairs within a factor of about 2 are left to the full solver.
+      EXPECT_GT(ratio, 0.3) << "trial " << trial;
       ++left;
       continue;
     }
     ++solved;
     // The reference is backward stable (error about 1e-16 scale). The characteristic
     // polynomial's coefficients carry rounding of about 1e-16 scale^3, which moves its root by
-    // that over the slope there, gap x scale: up to 760 x 1e-16 scale^2 / gap over 200,000
-    // such matrices.
+    // that over the slope there, gap x scale: up to 800 x 1e-16 scale^2 / gap over 200,000
+    // such matrices (8 x without the pairs left to the full solver).
     EXPECT_NEAR(lambda, ref.eigenvalues()[0], 1e-14 + 1e-13 * scale * scale / gap)
         << "trial " << trial;
     EXPECT_NEAR(std::abs(v.dot(ref.eigenvectors().col(0))), 1.0, 1e-12) << "trial " << trial;
     EXPECT_NEAR(v.norm(), 1.0, 1e-15);
   }
-  // Every planar case (the kernels' own) is solved here.
+  // Every planar case (the kernels' own, the even trials) is solved; of the others, those with
+  // the two smallest eigenvalues close are not.
   EXPECT_GE(solved, 1000);
-  EXPECT_LT(left, 50);
+  EXPECT_GT(left, 100);
 }
 
 TEST(KernelFitTest, SmallestEigenpairLeavesDegenerateCasesToTheFullSolver) {
