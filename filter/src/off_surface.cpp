@@ -43,6 +43,26 @@ bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vect
              const Eigen::Vector3f& nref) {
   using B = CandidateBuffer;
   const float* e = buf.f[B::kE].data();
+  // Whether the point's sensor normal lets it into kernel j's fit.
+  auto normals_agree_with = [&](std::size_t j) {
+    const Eigen::Vector3f nj(buf.f[B::kNx][j], buf.f[B::kNy][j], buf.f[B::kNz][j]);
+    return !(test.oriented && nref.squaredNorm() > 0.5f) || nref.dot(nj) > 0.5f;
+  };
+  // Any kernel that vouches will do, so the ones that vouch on upper bounds of the two weights
+  // alone are looked for first, over all candidates: the band test (below) can only lower the
+  // weights, and with under 10 % of the fit's weight the downdate cannot move the point past
+  // the threshold from within half of it. No eigen-decomposition is needed for these.
+  const float quick2 = 0.25f * test.threshold2;
+  for (std::size_t j = 0; j < buf.count; ++j) {
+    if (!(e[j] <= quick2)) continue;
+    const KernelFitRecord& fit = test.kernels->fits[buf.slot[j]];
+    const Eigen::Vector3d c(buf.f[B::kCx][j], buf.f[B::kCy][j], buf.f[B::kCz][j]);
+    const Eigen::Vector3d d0 = xl - (c - fit.offset());
+    const double r2 = d0.squaredNorm();
+    const double t_bound =
+        (normals_agree_with(j) && r2 < buf.f[B::kH2][j] ? 1.0 : 0.0) + (r2 == 0.0 ? 0.0 : 1.0);
+    if (t_bound <= 0.1 * fit.weight) return true;
+  }
   for (std::size_t j = 0; j < buf.count; ++j) {
     if (!(e[j] <= test.threshold2)) continue;
     const KernelFitRecord& fit = test.kernels->fits[buf.slot[j]];
@@ -53,14 +73,8 @@ bool vouched(const OffSurfaceTest& test, CandidateBuffer& buf, const Eigen::Vect
     Eigen::Matrix3d cov = fit.covariance();
     double w = fit.weight;
     // In the fit: within h of the centre, the sensor normals agreeing, inside the trimming band.
-    const Eigen::Vector3f nj(buf.f[B::kNx][j], buf.f[B::kNy][j], buf.f[B::kNz][j]);
-    const bool normals_agree = !(test.oriented && nref.squaredNorm() > 0.5f) || nref.dot(nj) > 0.5f;
-    // Upper bounds of the two weights (the band test below can only lower them) decide the
-    // shortcut without an eigen-decomposition.
-    const double r2 = d0.squaredNorm();
-    const bool is_centre = r2 == 0.0;
-    const double t_bound = (normals_agree && r2 < h2 ? 1.0 : 0.0) + (is_centre ? 0.0 : 1.0);
-    if (t_bound <= 0.1 * w && e[j] <= 0.25f * test.threshold2) return true;
+    const bool normals_agree = normals_agree_with(j);
+    const bool is_centre = d0.squaredNorm() == 0.0;
     // The fit's plane (its smallest eigenpair) decides whether the two points are in it.
     Eigen::Vector3d n0;
     double l0 = 0;
