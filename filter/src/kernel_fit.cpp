@@ -1,26 +1,55 @@
 #include "kernel_fit.h"
 
+#include <immintrin.h>
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 
+// The 8-wide helpers below return vectors by value; they are always inlined into functions
+// compiled for AVX2 or into their SSE2 twins, so the ABI note GCC gives for them does not apply.
+#pragma GCC diagnostic ignored "-Wpsabi"
+
 namespace scanclean::detail {
 namespace {
 
+typedef float V8f __attribute__((vector_size(32)));
+typedef int V8i __attribute__((vector_size(32)));
 typedef double V4d __attribute__((vector_size(32)));
 typedef long long V4l __attribute__((vector_size(32)));
+typedef float V4f __attribute__((vector_size(16)));
+// Unaligned stores and loads, through types the compiler knows may sit anywhere.
+typedef float V8fu __attribute__((vector_size(32), aligned(4)));
+typedef float V4fu __attribute__((vector_size(16), aligned(4)));
 
-// Four samples at a time, transposed to (x0 x1 x2 x3), (y...), (z...), (t...): lane l holds
-// the partial sums of the samples k = l mod 4 (fit_sums_scalar's sets), added in sample order;
-// the few samples past the last multiple of four go to lanes 0, 1, 2 alone. The lanes are
-// combined as (0 + 1) + (2 + 3).
-[[gnu::always_inline]] inline FitSums sums_impl(const FitSample* q, std::size_t n) {
-  static_assert(sizeof(FitSample) == sizeof(V4d), "a sample is four doubles");
-  V4d s0{}, sx{}, sy{}, sz{}, sxx{}, syy{}, szz{}, sxy{}, sxz{}, syz{};
-  auto add = [&](V4d x, V4d y, V4d z, V4d t) {
-    const V4d tx = t * x, ty = t * y, tz = t * z;
+[[gnu::always_inline]] inline V8f load8(const float* p) {
+  return *reinterpret_cast<const V8fu*>(p);
+}
+[[gnu::always_inline]] inline void store8(float* p, V8f v) {
+  *reinterpret_cast<V8fu*>(p) = v;
+}
+[[gnu::always_inline]] inline void store4(float* p, V4f v) {
+  *reinterpret_cast<V4fu*>(p) = v;
+}
+
+// The eight partial sums of one field combined in double, in fit_sums' order.
+[[gnu::always_inline]] inline double total8(const float* l) {
+  return ((static_cast<double>(l[0]) + static_cast<double>(l[1])) +
+          (static_cast<double>(l[2]) + static_cast<double>(l[3]))) +
+         ((static_cast<double>(l[4]) + static_cast<double>(l[5])) +
+          (static_cast<double>(l[6]) + static_cast<double>(l[7])));
+}
+
+// Eight samples at a time from the padded arrays: lane l holds the partial sums of the samples
+// k = l mod 8, in sample order (the padding adds exact zeros).
+[[gnu::always_inline]] inline FitSums sums_impl(const FitSampleSet& q) {
+  V8f s0{}, sx{}, sy{}, sz{}, sxx{}, syy{}, szz{}, sxy{}, sxz{}, syz{};
+  const float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data(), *pt = q.t.data();
+  for (std::size_t k = 0; k < q.n; k += kFitLanes) {
+    const V8f x = load8(px + k), y = load8(py + k), z = load8(pz + k), t = load8(pt + k);
+    const V8f tx = t * x, ty = t * y, tz = t * z;
     s0 += t;
     sx += tx;
     sy += ty;
@@ -31,34 +60,12 @@ typedef long long V4l __attribute__((vector_size(32)));
     sxy += tx * y;
     sxz += tx * z;
     syz += ty * z;
+  }
+  auto total = [](V8f v) {
+    float l[kFitLanes];
+    std::memcpy(l, &v, sizeof l);
+    return total8(l);
   };
-  std::size_t k = 0;
-  for (; k + 4 <= n; k += 4) {
-    // Four loads into separate vectors (an array would go through the stack), rows: samples
-    // (x y z t); then a 4 x 4 transpose to columns: fields.
-    V4d r0, r1, r2, r3;
-    std::memcpy(&r0, &q[k], sizeof r0);
-    std::memcpy(&r1, &q[k + 1], sizeof r1);
-    std::memcpy(&r2, &q[k + 2], sizeof r2);
-    std::memcpy(&r3, &q[k + 3], sizeof r3);
-    const V4d a = __builtin_shuffle(r0, r1, V4l{0, 4, 2, 6});  // x0 x1 z0 z1
-    const V4d b = __builtin_shuffle(r0, r1, V4l{1, 5, 3, 7});  // y0 y1 t0 t1
-    const V4d c = __builtin_shuffle(r2, r3, V4l{0, 4, 2, 6});  // x2 x3 z2 z3
-    const V4d d = __builtin_shuffle(r2, r3, V4l{1, 5, 3, 7});  // y2 y3 t2 t3
-    add(__builtin_shuffle(a, c, V4l{0, 1, 4, 5}), __builtin_shuffle(b, d, V4l{0, 1, 4, 5}),
-        __builtin_shuffle(a, c, V4l{2, 3, 6, 7}), __builtin_shuffle(b, d, V4l{2, 3, 6, 7}));
-  }
-  if (k < n) {  // the rest in lanes 0.., zero weight (adds exact zeros) in the others
-    V4d x{}, y{}, z{}, t{};
-    for (std::size_t l = 0; k + l < n; ++l) {
-      x[l] = q[k + l].x;
-      y[l] = q[k + l].y;
-      z[l] = q[k + l].z;
-      t[l] = q[k + l].t;
-    }
-    add(x, y, z, t);
-  }
-  auto total = [](V4d v) { return (v[0] + v[1]) + (v[2] + v[3]); };
   FitSums s;
   s.s0 = total(s0);
   s.sx = total(sx);
@@ -73,109 +80,92 @@ typedef long long V4l __attribute__((vector_size(32)));
   return s;
 }
 
-// AVX2 without FMA: the products and sums stay separately rounded, as in the scalar loop.
-[[gnu::target("avx2")]] FitSums sums_avx2(const FitSample* q, std::size_t n) {
-  return sums_impl(q, n);
-}
-FitSums sums_sse2(const FitSample* q, std::size_t n) {
-  return sums_impl(q, n);
-}
-
-// One trimming pass (trim_samples): sample k is kept when !(r r > limit2), with its residual
-// r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z); the kept ones move down in order, the
-// others' terms leave the sums. Four samples at a time: their residuals are formed in a vector,
-// with the scalar loop's operations (no fused multiply-add), and a block with none trimmed is
-// kept whole; so the results are the scalar loop's, bit for bit.
-[[gnu::always_inline]] inline void downdate(FitSums& fs, const FitSample& q) {
-  const double tx = q.t * q.x, ty = q.t * q.y, tz = q.t * q.z;
-  fs.s0 -= q.t;
-  fs.sx -= tx;
-  fs.sy -= ty;
-  fs.sz -= tz;
-  fs.sxx -= tx * q.x;
-  fs.syy -= ty * q.y;
-  fs.szz -= tz * q.z;
-  fs.sxy -= tx * q.y;
-  fs.sxz -= tx * q.z;
-  fs.syz -= ty * q.z;
+// The terms of one sample, as fit_sums forms them, taken out of the sums.
+[[gnu::always_inline]] inline void downdate(FitSums& fs, float x, float y, float z, float t) {
+  const float tx = t * x, ty = t * y, tz = t * z;
+  fs.s0 -= static_cast<double>(t);
+  fs.sx -= static_cast<double>(tx);
+  fs.sy -= static_cast<double>(ty);
+  fs.sz -= static_cast<double>(tz);
+  fs.sxx -= static_cast<double>(tx * x);
+  fs.syy -= static_cast<double>(ty * y);
+  fs.szz -= static_cast<double>(tz * z);
+  fs.sxy -= static_cast<double>(tx * y);
+  fs.sxz -= static_cast<double>(tx * z);
+  fs.syz -= static_cast<double>(ty * z);
 }
 
-[[gnu::always_inline]] inline double residual(const FitSample& q, const TrimPlane& p) {
-  return p.n[0] * (q.x - p.m[0]) + p.n[1] * (q.y - p.m[1]) + p.n[2] * (q.z - p.m[2]);
-}
+struct TrimPlaneF {
+  float nx, ny, nz, mx, my, mz, limit2;
+  explicit TrimPlaneF(const TrimPlane& p)
+      : nx(static_cast<float>(p.n[0])),
+        ny(static_cast<float>(p.n[1])),
+        nz(static_cast<float>(p.n[2])),
+        mx(static_cast<float>(p.m[0])),
+        my(static_cast<float>(p.m[1])),
+        mz(static_cast<float>(p.m[2])),
+        limit2(static_cast<float>(p.limit2)) {}
+  bool trims(float x, float y, float z) const {
+    const float r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
+    return r * r > limit2;
+  }
+};
 
-[[gnu::always_inline]] inline std::size_t trim_impl(FitSample* q, std::size_t n, const TrimPlane& p,
-                                                    FitSums& fs) {
-  const V4d nx = {p.n[0], p.n[0], p.n[0], p.n[0]}, ny = {p.n[1], p.n[1], p.n[1], p.n[1]},
-            nz = {p.n[2], p.n[2], p.n[2], p.n[2]};
-  const V4d mx = {p.m[0], p.m[0], p.m[0], p.m[0]}, my = {p.m[1], p.m[1], p.m[1], p.m[1]},
-            mz = {p.m[2], p.m[2], p.m[2], p.m[2]};
-  const V4d lim = {p.limit2, p.limit2, p.limit2, p.limit2};
-  // The mask of the samples of block k to trim (bit l: sample k + l); r0..r3 its rows.
-  auto block = [&](std::size_t k, V4d& r0, V4d& r1, V4d& r2, V4d& r3) {
-    std::memcpy(&r0, &q[k], sizeof r0);
-    std::memcpy(&r1, &q[k + 1], sizeof r1);
-    std::memcpy(&r2, &q[k + 2], sizeof r2);
-    std::memcpy(&r3, &q[k + 3], sizeof r3);
-    const V4d a = __builtin_shuffle(r0, r1, V4l{0, 4, 2, 6});  // x0 x1 z0 z1
-    const V4d b = __builtin_shuffle(r0, r1, V4l{1, 5, 3, 7});  // y0 y1 t0 t1
-    const V4d c = __builtin_shuffle(r2, r3, V4l{0, 4, 2, 6});  // x2 x3 z2 z3
-    const V4d d = __builtin_shuffle(r2, r3, V4l{1, 5, 3, 7});  // y2 y3 t2 t3
-    const V4d x = __builtin_shuffle(a, c, V4l{0, 1, 4, 5});
-    const V4d y = __builtin_shuffle(b, d, V4l{0, 1, 4, 5});
-    const V4d z = __builtin_shuffle(a, c, V4l{2, 3, 6, 7});
-    const V4d r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
-    const V4l out = r * r > lim;
-    return static_cast<unsigned>((out[0] & 1) | (out[1] & 2) | (out[2] & 4) | (out[3] & 8));
-  };
-  std::size_t k = 0;
-  V4d r[4];
-  unsigned mask = 0;
-  // Up to the first block with a sample to trim, nothing moves.
-  for (; k + 4 <= n; k += 4)
-    if ((mask = block(k, r[0], r[1], r[2], r[3])) != 0) break;
-  std::size_t kept = k;
-  bool loaded = k + 4 <= n;  // block k is in r and mask already
-  for (; k + 4 <= n; k += 4) {
-    if (!loaded) mask = block(k, r[0], r[1], r[2], r[3]);
-    loaded = false;
-    for (int l = 0; l < 4; ++l) {
+// One trimming pass: eight residuals at a time; a block with none trimmed is kept whole (moved
+// down with vector stores once something before it was trimmed), the others sample by sample.
+// (Without AVX2 the scalar loop, trim_samples_scalar, is the same pass.)
+[[gnu::target("avx2")]] std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSums& fs) {
+  float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data(), *pt = q.t.data();
+  const std::size_t n = q.n;
+  const V8f nx = V8f{} + p.nx, ny = V8f{} + p.ny, nz = V8f{} + p.nz;
+  const V8f mx = V8f{} + p.mx, my = V8f{} + p.my, mz = V8f{} + p.mz;
+  const V8f lim = V8f{} + p.limit2;
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < n; k += kFitLanes) {
+    const V8f x = load8(px + k), y = load8(py + k), z = load8(pz + k);
+    const V8f r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
+    const V8i out = r * r > lim;
+    unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(reinterpret_cast<__m256>(out)));
+    const std::size_t valid = std::min(kFitLanes, n - k);
+    mask &= (1u << valid) - 1;  // the padding is never trimmed, nor kept
+    if (mask == 0 && valid == kFitLanes) {
+      if (kept != k) {
+        store8(px + kept, x);
+        store8(py + kept, y);
+        store8(pz + kept, z);
+        store8(pt + kept, load8(pt + k));
+      }
+      kept += kFitLanes;
+      continue;
+    }
+    for (std::size_t l = 0; l < valid; ++l) {
+      const std::size_t s = k + l;
       if (mask & (1u << l)) {
-        downdate(fs, q[k + l]);
+        downdate(fs, px[s], py[s], pz[s], pt[s]);
       } else {
-        std::memcpy(&q[kept++], &r[l], sizeof r[l]);
+        px[kept] = px[s];
+        py[kept] = py[s];
+        pz[kept] = pz[s];
+        pt[kept] = pt[s];
+        ++kept;
       }
     }
   }
-  for (; k < n; ++k) {
-    const FitSample s = q[k];
-    const double e = residual(s, p);
-    if (!(e * e > p.limit2))
-      q[kept++] = s;
-    else
-      downdate(fs, s);
-  }
+  q.n = kept;
+  q.pad();
   return kept;
 }
 
-// AVX2 without FMA, as the sums.
-[[gnu::target("avx2")]] std::size_t trim_avx2(FitSample* q, std::size_t n, const TrimPlane& p,
-                                              FitSums& fs) {
-  return trim_impl(q, n, p, fs);
-}
-std::size_t trim_sse2(FitSample* q, std::size_t n, const TrimPlane& p, FitSums& fs) {
-  return trim_impl(q, n, p, fs);
-}
-
+// Four points at a time in double, as the scalar loop, then rounded to float; a block with all
+// four within h is stored with vector stores, the others point by point.
 [[gnu::always_inline]] inline std::size_t make_impl(const Eigen::Vector3d* p,
                                                     const std::uint32_t* js, std::size_t m,
                                                     const Eigen::Vector3d& c, double h2,
-                                                    double inv_h2, FitSample* out) {
-  const V4d cx = {c.x(), c.x(), c.x(), c.x()}, cy = {c.y(), c.y(), c.y(), c.y()},
-            cz = {c.z(), c.z(), c.z(), c.z()};
-  const V4d vh2 = {h2, h2, h2, h2}, vinv = {inv_h2, inv_h2, inv_h2, inv_h2};
-  const V4d one = {1, 1, 1, 1};
-  std::size_t n = 0, k = 0;
+                                                    double inv_h2, FitSampleSet& out) {
+  const V4d cx = V4d{} + c.x(), cy = V4d{} + c.y(), cz = V4d{} + c.z();
+  const V4d vh2 = V4d{} + h2, vinv = V4d{} + inv_h2, one = V4d{} + 1.0;
+  float *ox = out.x.data(), *oy = out.y.data(), *oz = out.z.data(), *ot = out.t.data();
+  std::size_t n = out.n, k = 0;
   for (; k + 4 <= m; k += 4) {
     const Eigen::Vector3d& a = p[js[k]];
     const Eigen::Vector3d& b = p[js[k + 1]];
@@ -189,16 +179,21 @@ std::size_t trim_sse2(FitSample* q, std::size_t n, const TrimPlane& p, FitSums& 
     V4d t = one - r2 * vinv;
     t *= t;
     t *= t;
-    // Rows (dx dy dz t) of the four samples; each is written at out[n] and counted if kept.
-    const V4d lo0 = __builtin_shuffle(dx, dy, V4l{0, 4, 2, 6});  // dx0 dy0 dx2 dy2
-    const V4d lo1 = __builtin_shuffle(dx, dy, V4l{1, 5, 3, 7});  // dx1 dy1 dx3 dy3
-    const V4d hi0 = __builtin_shuffle(dz, t, V4l{0, 4, 2, 6});   // dz0 t0 dz2 t2
-    const V4d hi1 = __builtin_shuffle(dz, t, V4l{1, 5, 3, 7});   // dz1 t1 dz3 t3
-    const V4d rows[4] = {
-        __builtin_shuffle(lo0, hi0, V4l{0, 1, 4, 5}), __builtin_shuffle(lo1, hi1, V4l{0, 1, 4, 5}),
-        __builtin_shuffle(lo0, hi0, V4l{2, 3, 6, 7}), __builtin_shuffle(lo1, hi1, V4l{2, 3, 6, 7})};
+    const V4f fx = __builtin_convertvector(dx, V4f), fy = __builtin_convertvector(dy, V4f);
+    const V4f fz = __builtin_convertvector(dz, V4f), ft = __builtin_convertvector(t, V4f);
+    if ((in[0] & in[1] & in[2] & in[3]) != 0) {
+      store4(ox + n, fx);
+      store4(oy + n, fy);
+      store4(oz + n, fz);
+      store4(ot + n, ft);
+      n += 4;
+      continue;
+    }
     for (int l = 0; l < 4; ++l) {
-      std::memcpy(&out[n], &rows[l], sizeof rows[l]);
+      ox[n] = fx[l];
+      oy[n] = fy[l];
+      oz[n] = fz[l];
+      ot[n] = ft[l];
       n += in[l] != 0 ? 1 : 0;
     }
   }
@@ -209,18 +204,31 @@ std::size_t trim_sse2(FitSample* q, std::size_t n, const TrimPlane& p, FitSums& 
     double t = 1.0 - r2 * inv_h2;
     t *= t;
     t *= t;
-    out[n++] = {dj.x(), dj.y(), dj.z(), t};
+    ox[n] = static_cast<float>(dj.x());
+    oy[n] = static_cast<float>(dj.y());
+    oz[n] = static_cast<float>(dj.z());
+    ot[n] = static_cast<float>(t);
+    ++n;
   }
-  return n;
+  const std::size_t added = n - out.n;
+  out.n = n;
+  return added;
 }
 
+// AVX2 without FMA: products and sums stay separately rounded, as in the scalar loops.
+[[gnu::target("avx2")]] FitSums sums_avx2(const FitSampleSet& q) {
+  return sums_impl(q);
+}
+FitSums sums_sse2(const FitSampleSet& q) {
+  return sums_impl(q);
+}
 [[gnu::target("avx2")]] std::size_t make_avx2(const Eigen::Vector3d* p, const std::uint32_t* js,
                                               std::size_t m, const Eigen::Vector3d& c, double h2,
-                                              double inv_h2, FitSample* out) {
+                                              double inv_h2, FitSampleSet& out) {
   return make_impl(p, js, m, c, h2, inv_h2, out);
 }
 std::size_t make_sse2(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
-                      const Eigen::Vector3d& c, double h2, double inv_h2, FitSample* out) {
+                      const Eigen::Vector3d& c, double h2, double inv_h2, FitSampleSet& out) {
   return make_impl(p, js, m, c, h2, inv_h2, out);
 }
 
@@ -230,6 +238,111 @@ bool have_avx2() {
 }
 
 }  // namespace
+
+void FitSampleSet::reserve(std::size_t cap) {
+  if (capacity() >= cap) return;
+  for (auto* v : {&x, &y, &z, &t}) v->resize(cap + kFitLanes);
+}
+
+void FitSampleSet::pad() {
+  reserve(n);
+  const std::size_t end = (n + kFitLanes - 1) / kFitLanes * kFitLanes;
+  for (std::size_t k = n; k < end; ++k) x[k] = y[k] = z[k] = t[k] = 0.0f;
+}
+
+void FitSampleSet::assign(const FitSample* samples, std::size_t count) {
+  reserve(count);
+  for (std::size_t k = 0; k < count; ++k) {
+    x[k] = static_cast<float>(samples[k].x);
+    y[k] = static_cast<float>(samples[k].y);
+    z[k] = static_cast<float>(samples[k].z);
+    t[k] = static_cast<float>(samples[k].t);
+  }
+  n = count;
+  pad();
+}
+
+void FitSampleSet::append_to(std::vector<FitSample>& out) const {
+  for (std::size_t k = 0; k < n; ++k) out.push_back({x[k], y[k], z[k], t[k]});
+}
+
+FitSums fit_sums(const FitSampleSet& samples) {
+  return have_avx2() ? sums_avx2(samples) : sums_sse2(samples);
+}
+
+FitSums fit_sums_scalar(const FitSampleSet& samples) {
+  float part[10][kFitLanes] = {};
+  for (std::size_t k = 0; k < samples.n; ++k) {
+    const std::size_t l = k % kFitLanes;
+    const float x = samples.x[k], y = samples.y[k], z = samples.z[k], t = samples.t[k];
+    const float tx = t * x, ty = t * y, tz = t * z;
+    part[0][l] += t;
+    part[1][l] += tx;
+    part[2][l] += ty;
+    part[3][l] += tz;
+    part[4][l] += tx * x;
+    part[5][l] += ty * y;
+    part[6][l] += tz * z;
+    part[7][l] += tx * y;
+    part[8][l] += tx * z;
+    part[9][l] += ty * z;
+  }
+  FitSums s;
+  double* f[10] = {&s.s0, &s.sx, &s.sy, &s.sz, &s.sxx, &s.syy, &s.szz, &s.sxy, &s.sxz, &s.syz};
+  for (int i = 0; i < 10; ++i) *f[i] = total8(part[i]);
+  return s;
+}
+
+std::size_t trim_samples(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums) {
+  const TrimPlaneF p(plane);
+  return have_avx2() ? trim_avx2(samples, p, sums) : trim_samples_scalar(samples, plane, sums);
+}
+
+std::size_t trim_samples_scalar(FitSampleSet& q, const TrimPlane& plane, FitSums& sums) {
+  const TrimPlaneF p(plane);
+  std::size_t kept = 0;
+  for (std::size_t k = 0; k < q.n; ++k) {
+    if (p.trims(q.x[k], q.y[k], q.z[k])) {
+      downdate(sums, q.x[k], q.y[k], q.z[k], q.t[k]);
+      continue;
+    }
+    q.x[kept] = q.x[k];
+    q.y[kept] = q.y[k];
+    q.z[kept] = q.z[k];
+    q.t[kept] = q.t[k];
+    ++kept;
+  }
+  q.n = kept;
+  q.pad();
+  return kept;
+}
+
+std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                         const Eigen::Vector3d& centre, double h2, double inv_h2,
+                         FitSampleSet& out) {
+  return have_avx2() ? make_avx2(p, js, m, centre, h2, inv_h2, out)
+                     : make_sse2(p, js, m, centre, h2, inv_h2, out);
+}
+
+std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
+                                const Eigen::Vector3d& centre, double h2, double inv_h2,
+                                FitSampleSet& out) {
+  const std::size_t before = out.n;
+  for (std::size_t k = 0; k < m; ++k) {
+    const Eigen::Vector3d dj = p[js[k]] - centre;
+    const double r2 = dj.squaredNorm();
+    if (!(r2 < h2)) continue;
+    double t = 1.0 - r2 * inv_h2;
+    t *= t;
+    t *= t;
+    out.x[out.n] = static_cast<float>(dj.x());
+    out.y[out.n] = static_cast<float>(dj.y());
+    out.z[out.n] = static_cast<float>(dj.z());
+    out.t[out.n] = static_cast<float>(t);
+    ++out.n;
+  }
+  return out.n - before;
+}
 
 bool smallest_eigenpair(const Eigen::Matrix3d& c, double& lambda, Eigen::Vector3d& v) {
   // The characteristic polynomial f(l) = l^3 - a l^2 + b l - d has three real roots. Left of
@@ -293,84 +406,17 @@ bool smallest_eigenpair(const Eigen::Matrix3d& c, double& lambda, Eigen::Vector3
   return true;
 }
 
-FitSums fit_sums(const FitSample* samples, std::size_t n) {
-  return have_avx2() ? sums_avx2(samples, n) : sums_sse2(samples, n);
-}
-
-std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
-                         const Eigen::Vector3d& centre, double h2, double inv_h2, FitSample* out) {
-  return have_avx2() ? make_avx2(p, js, m, centre, h2, inv_h2, out)
-                     : make_sse2(p, js, m, centre, h2, inv_h2, out);
-}
-
-std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
-                                const Eigen::Vector3d& centre, double h2, double inv_h2,
-                                FitSample* out) {
-  std::size_t n = 0;
-  for (std::size_t k = 0; k < m; ++k) {
-    const Eigen::Vector3d dj = p[js[k]] - centre;
-    const double r2 = dj.squaredNorm();
-    if (!(r2 < h2)) continue;
-    double t = 1.0 - r2 * inv_h2;
-    t *= t;
-    t *= t;
-    out[n++] = {dj.x(), dj.y(), dj.z(), t};
-  }
-  return n;
-}
-
-std::size_t trim_samples(FitSample* samples, std::size_t n, const TrimPlane& plane, FitSums& sums) {
-  return have_avx2() ? trim_avx2(samples, n, plane, sums) : trim_sse2(samples, n, plane, sums);
-}
-
-std::size_t trim_samples_scalar(FitSample* samples, std::size_t n, const TrimPlane& plane,
-                                FitSums& sums) {
-  std::size_t kept = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    const FitSample q = samples[k];
-    const double r = residual(q, plane);
-    if (!(r * r > plane.limit2))
-      samples[kept++] = q;
-    else
-      downdate(sums, q);
-  }
-  return kept;
-}
-
-FitSums fit_sums_scalar(const FitSample* samples, std::size_t n) {
-  FitSums set[4];
-  for (std::size_t k = 0; k < n; ++k) {
-    FitSums& s = set[k % 4];
-    const FitSample& q = samples[k];
-    const double t = q.t;
-    s.s0 += t;
-    s.sx += t * q.x;
-    s.sy += t * q.y;
-    s.sz += t * q.z;
-    s.sxx += t * q.x * q.x;
-    s.syy += t * q.y * q.y;
-    s.szz += t * q.z * q.z;
-    s.sxy += t * q.x * q.y;
-    s.sxz += t * q.x * q.z;
-    s.syz += t * q.y * q.z;
-  }
-  FitSums s;
-  for (double FitSums::*f :
-       {&FitSums::s0, &FitSums::sx, &FitSums::sy, &FitSums::sz, &FitSums::sxx, &FitSums::syy,
-        &FitSums::szz, &FitSums::sxy, &FitSums::sxz, &FitSums::syz})
-    s.*f = (set[0].*f + set[1].*f) + (set[2].*f + set[3].*f);
-  return s;
-}
-
 bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
                  int k_min, double eigen_floor, KernelFit& out) {
-  std::size_t n = samples.size();
-  const bool ok = fit_samples(samples.data(), n, centre, h, k_min, eigen_floor, out);
-  samples.resize(n);
+  thread_local FitSampleSet set;
+  set.assign(samples.data(), samples.size());
+  const bool ok = fit_samples(set, centre, h, k_min, eigen_floor, out);
+  samples.clear();
+  set.append_to(samples);
   return ok;
 }
 
-bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, double h, int k_min,
+bool fit_samples(FitSampleSet& nb, const Eigen::Vector3d& centre, double h, int k_min,
                  double eigen_floor, KernelFit& out) {
   constexpr double kTrim = 3.0;
   constexpr int kRefits = 2;
@@ -382,14 +428,15 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
   double s0_final = 0;
   bool full = false;         // the full solve in every round
   bool full_of_cov = false;  // es holds the full solve of cov
+  nb.pad();
   // The sums of the first round are formed over the samples; each later round's are the last
   // round's with the trimmed samples' terms taken out (a few of some 250: a pass over them all
   // again cost more than the eigen-decomposition).
-  FitSums fs = fit_sums(nb, n);
+  FitSums fs = fit_sums(nb);
   for (int round = 0;; ++round) {
     const double s0 = fs.s0, sx = fs.sx, sy = fs.sy, sz = fs.sz, sxx = fs.sxx, syy = fs.syy,
                  szz = fs.szz, sxy = fs.sxy, sxz = fs.sxz, syz = fs.syz;
-    if (static_cast<int>(n) < k_min || !(s0 > 0)) return false;
+    if (static_cast<int>(nb.n) < k_min || !(s0 > 0)) return false;
     s0_final = s0;
     m = Eigen::Vector3d(sx / s0, sy / s0, sz / s0);
     Eigen::Matrix3d c;
@@ -417,11 +464,9 @@ bool fit_samples(FitSample* nb, std::size_t& n, const Eigen::Vector3d& centre, d
     }
     const double var = std::max(lambda0, floor2);
     const double limit2 = kTrim * kTrim * var * h2;
-    const std::size_t before = n;
+    const std::size_t before = nb.n;
     const TrimPlane plane{{nrm.x(), nrm.y(), nrm.z()}, {m.x(), m.y(), m.z()}, limit2};
-    const std::size_t kept = trim_samples(nb, n, plane, fs);
-    n = kept;
-    if (n == before) break;
+    if (trim_samples(nb, plane, fs) == before) break;
   }
   if (!full_of_cov) es.computeDirect(cov);
   out.weight = s0_final;

@@ -29,19 +29,38 @@ struct FitSample {
   double x, y, z, t;
 };
 
-//! The weighted sums of the fit (eq. 2) over samples: sum t, sum t x, ..., sum t x x, ...,
-//! sum t x y, each product formed as (t x) y. Each sum is four partial sums in double (sample k
-//! in partial k mod 4, in sample order), combined as (0 + 1) + (2 + 3): independent additions
-//! for the vector path (4 doubles a lane, AVX2 when the CPU has it), which does the very same
-//! operations per sum, so it gives the scalar loop's results bit for bit.
+//! The lanes of the fit's vector loops.
+constexpr std::size_t kFitLanes = 8;
+
+//! The neighbours of a fit as a struct of arrays in float (offsets from the centre point in
+//! metres, chi weights), the form the fit's loops read: eight at a time with AVX2. The entries
+//! from n to the next multiple of kFitLanes are zeros (pad()).
+struct FitSampleSet {
+  std::vector<float> x, y, z, t;
+  std::size_t n = 0;
+  std::size_t capacity() const { return x.size() < kFitLanes ? 0 : x.size() - kFitLanes; }
+  //! Room for cap samples (and the padding past them); keeps the first n.
+  void reserve(std::size_t cap);
+  void pad();
+  void assign(const FitSample* samples, std::size_t count);  //!< rounded to float
+  void append_to(std::vector<FitSample>& out) const;         //!< the n samples, in double
+};
+
+//! The weighted sums of the fit (eq. 2) over the samples: sum t, sum t x, ..., sum t x x, ...,
+//! sum t x y, each product formed in float as (t x) y. Each sum is eight partial sums in float
+//! (sample k in partial k mod 8, in sample order), combined in double as
+//! ((0 + 1) + (2 + 3)) + ((4 + 5) + (6 + 7)): the vector path (AVX2 without fused multiply-add
+//! when the CPU has it) does the very same operations per sum, so it gives the scalar loop's
+//! results bit for bit. With some 100 samples a partial, a sum is within about 1e-5 of its
+//! exact value (relative); the fit's noise is far larger.
 struct FitSums {
   double s0 = 0, sx = 0, sy = 0, sz = 0;
   double sxx = 0, syy = 0, szz = 0;
   double sxy = 0, sxz = 0, syz = 0;
 };
-FitSums fit_sums(const FitSample* samples, std::size_t n);
+FitSums fit_sums(const FitSampleSet& samples);
 //! The scalar reference of fit_sums (tests).
-FitSums fit_sums_scalar(const FitSample* samples, std::size_t n);
+FitSums fit_sums_scalar(const FitSampleSet& samples);
 
 //! The smallest eigenvalue of the symmetric c and a unit eigenvector of it, by Newton's method
 //! on the characteristic polynomial from below (a few steps; no trigonometry), the vector from
@@ -57,24 +76,26 @@ struct TrimPlane {
   double limit2;
 };
 //! Keeps the samples whose residual r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z) has
-//! !(r r > limit2), moved down in order; takes the others' terms out of `sums` (the fit_sums
-//! products, in sample order). Returns the count kept. Vectorised (four samples a lane when
-//! the CPU has AVX2), with the scalar loop's operations: its results bit for bit.
-std::size_t trim_samples(FitSample* samples, std::size_t n, const TrimPlane& plane, FitSums& sums);
+//! !(r r > limit2), all in float (the plane rounded to float), moved down in order; takes the
+//! others' terms (the float products of fit_sums) out of `sums`, in sample order. Returns the
+//! count kept (and sets samples.n to it, padded). Vectorised (eight samples at a time with
+//! AVX2), with the scalar loop's operations: its results bit for bit.
+std::size_t trim_samples(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums);
 //! The scalar reference of trim_samples (tests).
-std::size_t trim_samples_scalar(FitSample* samples, std::size_t n, const TrimPlane& plane,
-                                FitSums& sums);
+std::size_t trim_samples_scalar(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums);
 
-//! The samples of the points p[js[k]], k < m, within h of `centre` (r2 < h2), in order: offset
-//! p[j] - centre, r2 = (dx dx + dy dy) + dz dz, chi weight t = 1 - r2 inv_h2 squared twice.
-//! Writes them to out (room for m) and returns their count. Four points at a time when the CPU
-//! has AVX2, with the scalar loop's operations (no fused multiply-add): its results bit for bit.
+//! Appends to out the samples of the points p[js[k]], k < m, within h of `centre` (r2 < h2), in
+//! order: offset p[j] - centre and r2 = (dx dx + dy dy) + dz dz in double, chi weight
+//! t = 1 - r2 inv_h2 squared twice, each rounded to float. out needs room for m more. Four
+//! points at a time with AVX2, with the scalar loop's operations (no fused multiply-add): its
+//! results bit for bit. Returns the count appended (out is not padded).
 std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
-                         const Eigen::Vector3d& centre, double h2, double inv_h2, FitSample* out);
+                         const Eigen::Vector3d& centre, double h2, double inv_h2,
+                         FitSampleSet& out);
 //! The scalar reference of make_samples (tests).
 std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
                                 const Eigen::Vector3d& centre, double h2, double inv_h2,
-                                FitSample* out);
+                                FitSampleSet& out);
 
 //! The weighted PCA of `samples` around the centre point `centre` (eq. 2), repeated without the
 //! samples farther than 3 standard deviations from its plane (sqrt of lambda_3, at least the
@@ -83,10 +104,11 @@ std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* j
 //! sigma off its plane it adds about 40 % to the kernel's normal variance with K_h = 96), and they
 //! would vouch for it. Fills everything but `n` (the caller orients it). Returns false if fewer
 //! than k_min samples remain. Trims `samples` in place.
+bool fit_samples(FitSampleSet& samples, const Eigen::Vector3d& centre, double h, int k_min,
+                 double eigen_floor, KernelFit& out);
+//! As above on samples given in double (rounded to float for the fit); `samples` becomes the
+//! ones kept.
 bool fit_samples(std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
-                 int k_min, double eigen_floor, KernelFit& out);
-//! As above on samples[0, n); n becomes the number left after trimming.
-bool fit_samples(FitSample* samples, std::size_t& n, const Eigen::Vector3d& centre, double h,
                  int k_min, double eigen_floor, KernelFit& out);
 
 //! The normal of a fitted kernel: the sensor normal vi when `use_dir` (an oriented fit at a point
@@ -115,49 +137,31 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
   const double h2 = h * h, inv_h2 = 1.0 / h2;
   const bool use_dir = oriented && d.has_v(i);
   const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
-  // The neighbours go to a buffer that only grows, through a pointer and a count kept in
-  // registers (a push_back on the thread_local vector stored its end at every sample).
-  thread_local std::vector<FitSample> buf;
-  FitSample* nb = buf.data();
-  std::size_t n = 0, cap = buf.size();
-  if (use_dir) {
-    visit([&](std::size_t j) {
-      const Eigen::Vector3d dj = d.p[j] - pi;
-      const double r2 = dj.squaredNorm();
-      if (!(r2 < h2)) return;
-      if (!(d.v[j].dot(vi) > 0.5f)) return;
-      double t = 1.0 - r2 * inv_h2;
-      t *= t;
-      t *= t;
-      if (n == cap) {
-        buf.resize(std::max<std::size_t>(256, 2 * cap));
-        nb = buf.data();
-        cap = buf.size();
-      }
-      nb[n++] = {dj.x(), dj.y(), dj.z(), t};
-    });
-  } else {
-    // The neighbours' indices in blocks, made into samples a block at a time (make_samples).
-    constexpr std::size_t kBlock = 64;
-    std::uint32_t js[kBlock];
-    std::size_t m = 0;
-    auto flush = [&] {
-      if (n + m > cap) {
-        buf.resize(std::max<std::size_t>(256, 2 * (n + m)));
-        nb = buf.data();
-        cap = buf.size();
-      }
-      n += make_samples(d.p.data(), js, m, pi, h2, inv_h2, nb + n);
-      m = 0;
-    };
-    visit([&](std::size_t j) {
-      js[m++] = static_cast<std::uint32_t>(j);
-      if (m == kBlock) flush();
-    });
-    flush();
+  // The neighbours go to a buffer that only grows; their indices are made into samples a block
+  // at a time (make_samples).
+  thread_local FitSampleSet set;
+  set.n = 0;
+  constexpr std::size_t kBlock = 64;
+  std::uint32_t js[kBlock];
+  std::size_t m = 0;
+  auto flush = [&] {
+    if (set.n + m > set.capacity()) set.reserve(std::max<std::size_t>(256, 2 * (set.n + m)));
+    make_samples(d.p.data(), js, m, pi, h2, inv_h2, set);
+    m = 0;
+  };
+  visit([&](std::size_t j) {
+    // With sensor normals, only the neighbours facing the same way.
+    if (use_dir && !(d.v[j].dot(vi) > 0.5f)) return;
+    js[m++] = static_cast<std::uint32_t>(j);
+    if (m == kBlock) flush();
+  });
+  flush();
+  set.pad();
+  if (untrimmed) {
+    untrimmed->clear();
+    set.append_to(*untrimmed);
   }
-  if (untrimmed) untrimmed->assign(nb, nb + n);
-  if (!fit_samples(nb, n, pi, h, k_min, eigen_floor, out)) return false;
+  if (!fit_samples(set, pi, h, k_min, eigen_floor, out)) return false;
   out.n = kernel_normal(out, use_dir, d.v_orients_only, vi);
   return true;
 }

@@ -13,6 +13,19 @@
 namespace scanclean::detail {
 namespace {
 
+// The fit works in float: samples given in double are rounded first. The oracles below get the
+// same rounded values.
+FitSample as_float(FitSample q) {
+  return {static_cast<float>(q.x), static_cast<float>(q.y), static_cast<float>(q.z),
+          static_cast<float>(q.t)};
+}
+
+FitSampleSet set_of(const std::vector<FitSample>& s) {
+  FitSampleSet set;
+  set.assign(s.data(), s.size());
+  return set;
+}
+
 // Samples on a tilted plane with uniform noise of half-width `noise` along its normal (uniform,
 // so that no sample lies beyond the 3-sigma trimming band), chi-weighted for the radius h.
 std::vector<FitSample> plane_samples(int n, double h, double noise, std::uint32_t seed) {
@@ -28,7 +41,7 @@ std::vector<FitSample> plane_samples(int n, double h, double noise, std::uint32_
     double t = 1 - r2 / (h * h);
     t *= t;
     t *= t;
-    s.push_back({p.x(), p.y(), p.z(), t});
+    s.push_back(as_float({p.x(), p.y(), p.z(), t}));
   }
   return s;
 }
@@ -62,12 +75,14 @@ TEST(KernelFitTest, MatchesTheDirectWeightedPca) {
   KernelFit fit;
   ASSERT_TRUE(fit_samples(s, centre, h, 8, 0.05, fit));
   EXPECT_EQ(s.size(), 200u);  // nothing beyond the trimming band
-  EXPECT_NEAR(fit.weight, ref.weight, 1e-12 * ref.weight);
-  EXPECT_LT((fit.m - ref.m).norm(), 1e-15);
-  EXPECT_LT((fit.c - (centre + ref.m)).norm(), 1e-12);
-  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
+  // The sums are float partial sums of some 25 products each: within about 25 x 6e-8 of the
+  // exact sums (relative), and the covariance within that of its largest entries (h^2 / 6).
+  EXPECT_NEAR(fit.weight, ref.weight, 2e-6 * ref.weight);
+  EXPECT_LT((fit.m - ref.m).norm(), 2e-6 * h);
+  EXPECT_LT((fit.c - (centre + ref.m)).norm(), 2e-6 * h);
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-5 * ref.cov.norm());
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(ref.cov);
-  for (int k = 0; k < 3; ++k) EXPECT_NEAR(fit.lambda[k], es.eigenvalues()[k], 1e-9 * h * h);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(fit.lambda[k], es.eigenvalues()[k], 1e-6 * h * h);
   // The normal is the eigenvector of the smallest eigenvalue (either sign).
   EXPECT_NEAR(std::abs(fit.e.col(0).dot(es.eigenvectors().col(0))), 1.0, 1e-9);
 }
@@ -80,11 +95,12 @@ TEST(KernelFitTest, TrimsANearOutlierFromTheFit) {
   // A point half-way out of the ball, 0.4 h off the plane: far outside 3 standard deviations.
   const Eigen::Vector3d nrm = Eigen::Vector3d(0.3, -0.2, 1.0).normalized();
   const Eigen::Vector3d p = 0.3 * h * nrm.unitOrthogonal() + 0.4 * h * nrm;
-  s.push_back({p.x(), p.y(), p.z(), std::pow(1 - p.squaredNorm() / (h * h), 4)});
+  s.push_back(as_float({p.x(), p.y(), p.z(), std::pow(1 - p.squaredNorm() / (h * h), 4)}));
   KernelFit fit;
   ASSERT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), h, 8, 0.05, fit));
   EXPECT_EQ(s.size(), clean.size());
-  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
+  // As the clean fit, to float rounding of the sums (the outlier's terms taken out again).
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-5 * ref.cov.norm());
 }
 
 TEST(KernelFitTest, TrimmedFitsEqualTheDirectPcaOfTheSamplesKept) {
@@ -97,16 +113,16 @@ TEST(KernelFitTest, TrimmedFitsEqualTheDirectPcaOfTheSamplesKept) {
   for (int k = 0; k < 6; ++k) {
     const Eigen::Vector3d p =
         (0.1 + 0.1 * k) * h * nrm.unitOrthogonal() + (0.05 + 0.04 * k) * h * nrm;
-    s.push_back({p.x(), p.y(), p.z(), std::pow(1 - p.squaredNorm() / (h * h), 4)});
+    s.push_back(as_float({p.x(), p.y(), p.z(), std::pow(1 - p.squaredNorm() / (h * h), 4)}));
   }
   const std::size_t before = s.size();
   KernelFit fit;
   ASSERT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), h, 8, 0.05, fit));
   EXPECT_LT(s.size(), before);  // something was trimmed
   const Direct ref = direct_fit(s);
-  EXPECT_NEAR(fit.weight, ref.weight, 1e-12 * ref.weight);
-  EXPECT_LT((fit.m - ref.m).norm(), 1e-12 * h);
-  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-10 * ref.cov.norm());
+  EXPECT_NEAR(fit.weight, ref.weight, 2e-6 * ref.weight);
+  EXPECT_LT((fit.m - ref.m).norm(), 2e-6 * h);
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-5 * ref.cov.norm());
 }
 
 TEST(KernelFitTest, TooFewSamplesGiveNoFit) {
@@ -121,13 +137,14 @@ TEST(KernelFitTest, VectorSumsEqualTheScalarLoopBitForBit) {
   // (order, fused multiply-add) would show in the last bits.
   std::mt19937 rng(14);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (const int n : {0, 1, 3, 8, 97, 250}) {
+  for (const int n : {0, 1, 3, 8, 15, 97, 250}) {
     std::vector<FitSample> s;
     for (int k = 0; k < n; ++k)
       s.push_back({3.1 + 1e-3 * u(rng), -7.7 + 1e-3 * u(rng), 0.2 + 1e-3 * u(rng),
                    std::pow(0.5 + 0.5 * u(rng), 4)});
-    const FitSums v = fit_sums(s.data(), s.size());
-    const FitSums r = fit_sums_scalar(s.data(), s.size());
+    const FitSampleSet set = set_of(s);
+    const FitSums v = fit_sums(set);
+    const FitSums r = fit_sums_scalar(set);
     const double vs[10] = {v.s0, v.sx, v.sy, v.sz, v.sxx, v.syy, v.szz, v.sxy, v.sxz, v.syz};
     const double rs[10] = {r.s0, r.sx, r.sy, r.sz, r.sxx, r.syy, r.szz, r.sxy, r.sxz, r.syz};
     for (int f = 0; f < 10; ++f) EXPECT_EQ(vs[f], rs[f]) << "n " << n << ", sum " << f;
@@ -205,29 +222,37 @@ TEST(KernelFitTest, VectorSamplesEqualTheScalarLoopBitForBit) {
   for (const std::size_t m : {0, 1, 4, 7, 64, 299}) {
     std::vector<std::uint32_t> js(m);
     for (std::size_t k = 0; k < m; ++k) js[k] = static_cast<std::uint32_t>((k * 37) % p.size());
-    std::vector<FitSample> v(m), r(m);
-    const std::size_t nv =
-        make_samples(p.data(), js.data(), m, centre, h * h, 1 / (h * h), v.data());
+    // Appended after three samples already there.
+    FitSampleSet vs = set_of({{1, 2, 3, 4}, {5, 6, 7, 8}, {9, 10, 11, 12}}), rs = vs;
+    vs.reserve(vs.n + m);
+    rs.reserve(rs.n + m);
+    const std::size_t nv = make_samples(p.data(), js.data(), m, centre, h * h, 1 / (h * h), vs);
     const std::size_t nr =
-        make_samples_scalar(p.data(), js.data(), m, centre, h * h, 1 / (h * h), r.data());
+        make_samples_scalar(p.data(), js.data(), m, centre, h * h, 1 / (h * h), rs);
     ASSERT_EQ(nv, nr) << "m " << m;
+    ASSERT_EQ(vs.n, 3 + nv);
+    ASSERT_EQ(rs.n, 3 + nr);
+    std::vector<FitSample> v, r;
+    vs.append_to(v);
+    rs.append_to(r);
+    EXPECT_EQ(v[2].t, 12.0);
     if (m >= 64) {
       EXPECT_GT(nr, 0u);
       EXPECT_LT(nr, m);
     }
-    for (std::size_t k = 0; k < nr; ++k) {
+    for (std::size_t k = 3; k < r.size(); ++k) {
       EXPECT_EQ(v[k].x, r[k].x);
       EXPECT_EQ(v[k].y, r[k].y);
       EXPECT_EQ(v[k].z, r[k].z);
       EXPECT_EQ(v[k].t, r[k].t);
-      EXPECT_LT(std::sqrt(r[k].x * r[k].x + r[k].y * r[k].y + r[k].z * r[k].z), h * (1 + 1e-12));
+      EXPECT_LT(std::sqrt(r[k].x * r[k].x + r[k].y * r[k].y + r[k].z * r[k].z), h * (1 + 1e-6));
     }
   }
 }
 
 TEST(KernelFitTest, VectorTrimmingEqualsTheScalarLoopBitForBit) {
   // A plane with some samples far off it, at the start, in the middle, in the last block and in
-  // the tail past the last multiple of four: the same samples kept, in the same order, and the
+  // the tail past the last multiple of eight: the same samples kept, in the same order, and the
   // same sums left, bit for bit.
   std::mt19937 rng(16);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -241,10 +266,14 @@ TEST(KernelFitTest, VectorTrimmingEqualsTheScalarLoopBitForBit) {
         s.push_back({0.1 * u(rng), 0.1 * u(rng), z, std::pow(0.5 + 0.5 * u(rng), 4)});
       }
       const TrimPlane plane{{0.01, -0.02, 0.9997499}, {1e-4, -2e-4, 3e-4}, 9 * 1e-6};
-      std::vector<FitSample> v = s, r = s;
-      FitSums vs = fit_sums_scalar(s.data(), s.size()), rs = vs;
-      const std::size_t nv = trim_samples(v.data(), v.size(), plane, vs);
-      const std::size_t nr = trim_samples_scalar(r.data(), r.size(), plane, rs);
+      FitSampleSet vset = set_of(s), rset = vset;
+      FitSums vs = fit_sums_scalar(vset), rs = vs;
+      const std::size_t nv = trim_samples(vset, plane, vs);
+      const std::size_t nr = trim_samples_scalar(rset, plane, rs);
+      ASSERT_EQ(vset.n, nv);
+      std::vector<FitSample> v, r;
+      vset.append_to(v);
+      rset.append_to(r);
       ASSERT_EQ(nv, nr) << "n " << n << ", pattern " << pattern;
       if (pattern == 1 && n > 0) {
         EXPECT_LT(nr, s.size());
@@ -269,18 +298,23 @@ TEST(KernelFitTest, TrimmingKeepsExactlyTheSamplesWithinTheLimit) {
   std::mt19937 rng(17);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::vector<FitSample> s;
-  for (int k = 0; k < 203; ++k) s.push_back({u(rng), u(rng), 0.1 * u(rng), 1.0});
+  for (int k = 0; k < 203; ++k) s.push_back(as_float({u(rng), u(rng), 0.1 * u(rng), 1.0}));
   const TrimPlane plane{{0, 0, 1}, {0, 0, 0.01}, 0.05 * 0.05};
   std::vector<FitSample> expect;
   for (const FitSample& q : s)
     if (std::abs(q.z - 0.01) <= 0.05) expect.push_back(q);
-  FitSums sums = fit_sums_scalar(s.data(), s.size());
-  std::vector<FitSample> v = s;
-  const std::size_t kept = trim_samples(v.data(), v.size(), plane, sums);
+  FitSampleSet set = set_of(s);
+  FitSums sums = fit_sums_scalar(set);
+  const std::size_t kept = trim_samples(set, plane, sums);
   ASSERT_EQ(kept, expect.size());
   ASSERT_LT(kept, s.size());
+  std::vector<FitSample> v;
+  set.append_to(v);
   for (std::size_t k = 0; k < kept; ++k) EXPECT_EQ(v[k].z, expect[k].z);
   EXPECT_NEAR(sums.s0, static_cast<double>(kept), 1e-9);
+  // The padding past the samples kept is zeros (the vector loops read it).
+  for (std::size_t k = kept; k < (kept + kFitLanes - 1) / kFitLanes * kFitLanes; ++k)
+    EXPECT_EQ(set.t[k], 0.0f);
 }
 
 }  // namespace
