@@ -16,21 +16,35 @@ namespace {
 
 constexpr std::size_t kMaxRadii = 16;
 
-// Moments of the neighbours in one shell, relative to the query point.
+// Moments of the neighbours in one shell, relative to the query point: the count, the sums of
+// the coordinates and of their products (xx yy zz xy xz yz; the matrix is symmetric).
 struct Moments {
   double n = 0;
-  Eigen::Vector3d s = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d ss = Eigen::Matrix3d::Zero();
-  void add(const Eigen::Vector3d& q) {
+  double s[3] = {0, 0, 0};
+  double ss[6] = {0, 0, 0, 0, 0, 0};
+  void add(double x, double y, double z) {
     n += 1;
-    s += q;
-    ss.noalias() += q * q.transpose();
+    s[0] += x;
+    s[1] += y;
+    s[2] += z;
+    ss[0] += x * x;
+    ss[1] += y * y;
+    ss[2] += z * z;
+    ss[3] += x * y;
+    ss[4] += x * z;
+    ss[5] += y * z;
   }
   Moments& operator+=(const Moments& o) {
     n += o.n;
-    s += o.s;
-    ss += o.ss;
+    for (int a = 0; a < 3; ++a) s[a] += o.s[a];
+    for (int a = 0; a < 6; ++a) ss[a] += o.ss[a];
     return *this;
+  }
+  Eigen::Vector3d mean() const { return Eigen::Vector3d(s[0], s[1], s[2]) / n; }
+  Eigen::Matrix3d second() const {
+    Eigen::Matrix3d m;
+    m << ss[0], ss[3], ss[4], ss[3], ss[1], ss[5], ss[4], ss[5], ss[2];
+    return m / n;
   }
 };
 
@@ -45,47 +59,56 @@ std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const Ne
   std::array<double, kMaxRadii> r2{};
   for (std::size_t k = 0; k < K; ++k) r2[k] = o.radii[k] * o.radii[k];
   const float rmax = static_cast<float>(o.radii[K - 1] * 1.0001);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t qi = range.begin(); qi < range.end(); ++qi) {
-                        const std::size_t i = queries[qi];
-                        const Eigen::Vector3d& x = p[i];
-                        // Shell k holds the neighbours with r_{k-1} < |q| <= r_k; the balls are
-                        // their sums.
-                        std::array<Moments, kMaxRadii> shell;
-                        index.for_each_within(x.cast<float>(), rmax, [&](std::uint32_t j, float) {
-                          if (j == i) return;
-                          const Eigen::Vector3d q = p[j] - x;
-                          const double d2 = q.squaredNorm();
-                          std::size_t k = 0;
-                          while (k < K && d2 > r2[k]) ++k;
-                          if (k < K) shell[k].add(q);
-                        });
-                        Moments ball;
-                        double lo = -HUGE_VAL, hi = HUGE_VAL;
-                        Eigen::Vector3d n_prev = Eigen::Vector3d::Zero();
-                        for (std::size_t k = 0; k < K; ++k) {
-                          ball += shell[k];
-                          if (ball.n < o.k_min) break;
-                          const Eigen::Vector3d c = ball.s / ball.n;
-                          const Eigen::Matrix3d cov = ball.ss / ball.n - c * c.transpose();
-                          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
-                          es.computeDirect(cov);
-                          Eigen::Vector3d nk = es.eigenvectors().col(0);
-                          if (nk.dot(n_prev) < 0)
-                            nk = -nk;  // the same side as the smaller ball's normal
-                          n_prev = nk;
-                          const double z = -nk.dot(c);  // the point's signed distance to the plane
-                          const double var =
-                              o.sigma > 0 ? o.sigma * o.sigma : std::max(es.eigenvalues()[0], 0.0);
-                          const double se = std::sqrt(var / ball.n);
-                          lo = std::max(lo, z - o.gamma * se);
-                          hi = std::min(hi, z + o.gamma * se);
-                          if (lo > hi) break;
-                          out[qi] = o.radii[k];
-                        }
-                      }
+  // The positions in the index's slot order: the neighbours of a query sit in a few runs of
+  // consecutive slots (read in input order, they were scattered over the whole cloud, and the
+  // loop waited on the memory). The same neighbours, in the same order.
+  const std::vector<std::uint32_t>& order = index.order();
+  std::vector<Eigen::Vector3d> ps(order.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t k = r.begin(); k < r.end(); ++k) ps[k] = p[order[k]];
                     });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, queries.size(), 64),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t qi = range.begin(); qi < range.end(); ++qi) {
+          const std::size_t i = queries[qi];
+          const Eigen::Vector3d& x = p[i];
+          // Shell k holds the neighbours with r_{k-1} < |q| <= r_k; the balls are
+          // their sums.
+          std::array<Moments, kMaxRadii> shell;
+          const std::uint32_t own = index.slot_of(static_cast<std::uint32_t>(i));
+          index.for_each_slot_within(x.cast<float>(), rmax, [&](std::uint32_t j, float) {
+            if (j == own) return;
+            const Eigen::Vector3d q = ps[j] - x;
+            const double d2 = q.squaredNorm();
+            std::size_t k = 0;  // the first radius at or beyond |q|
+            for (std::size_t r = 0; r < K; ++r) k += d2 > r2[r] ? 1 : 0;
+            if (k < K) shell[k].add(q.x(), q.y(), q.z());
+          });
+          Moments ball;
+          double lo = -HUGE_VAL, hi = HUGE_VAL;
+          Eigen::Vector3d n_prev = Eigen::Vector3d::Zero();
+          for (std::size_t k = 0; k < K; ++k) {
+            ball += shell[k];
+            if (ball.n < o.k_min) break;
+            const Eigen::Vector3d c = ball.mean();
+            const Eigen::Matrix3d cov = ball.second() - c * c.transpose();
+            Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+            es.computeDirect(cov);
+            Eigen::Vector3d nk = es.eigenvectors().col(0);
+            if (nk.dot(n_prev) < 0) nk = -nk;  // the same side as the smaller ball's normal
+            n_prev = nk;
+            const double z = -nk.dot(c);  // the point's signed distance to the plane
+            const double var = o.sigma > 0 ? o.sigma * o.sigma : std::max(es.eigenvalues()[0], 0.0);
+            const double se = std::sqrt(var / ball.n);
+            lo = std::max(lo, z - o.gamma * se);
+            hi = std::min(hi, z + o.gamma * se);
+            if (lo > hi) break;
+            out[qi] = o.radii[k];
+          }
+        }
+      });
   return out;
 }
 
