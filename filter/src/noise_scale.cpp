@@ -20,6 +20,20 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
   // hs = 2.4 sigma, measured), so h = max(h0, noise_factor sigma(h)) is solved as a fixed point
   // from hs = h0 upwards: hs grows while noise_factor sigma(hs) exceeds it, and the estimate
   // grows with it.
+  // The points in the index's slot order (positions and sensor normals, what the fits read):
+  // a fit's neighbours are then a few runs of consecutive slots instead of points scattered
+  // over the cloud in input order. The same neighbours, in the same order.
+  PointSet ds;
+  ds.v_orients_only = in.v_orients_only;
+  {
+    const std::vector<std::uint32_t>& order = index.order();
+    ds.p.resize(order.size());
+    if (!in.v.empty()) ds.v.resize(order.size());
+    parallel_each(order.size(), [&](std::size_t k) {
+      ds.p[k] = in.p[order[k]];
+      if (!in.v.empty()) ds.v[k] = in.v[order[k]];
+    });
+  }
   auto sigma_at = [&](double hs) {
     ns.reach = std::max(ns.reach, hs * 1.0001);
     std::vector<double> sig(sigma_samples.size(), -1.0);
@@ -28,10 +42,11 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
       KernelFit fit;
       const std::size_t i = sigma_samples[k];
       if (fit_kernel(
-              in, i, hs, o.k_min, use_sensor_normals, o.eigen_floor,
+              ds, index.slot_of(static_cast<std::uint32_t>(i)), hs, o.k_min, use_sensor_normals,
+              o.eigen_floor,
               [&](auto&& g) {
-                index.for_each_within(pf[i], static_cast<float>(hs * 1.0001),
-                                      [&](std::uint32_t j, float) { g(j); });
+                index.for_each_slot_within(pf[i], static_cast<float>(hs * 1.0001),
+                                           [&](std::uint32_t s, float) { g(s); });
               },
               fit))
         sig[k] = std::sqrt(fit.lambda[0]);
