@@ -24,6 +24,9 @@ typedef float V4f __attribute__((vector_size(16)));
 typedef float V8fu __attribute__((vector_size(32), aligned(4)));
 typedef float V4fu __attribute__((vector_size(16), aligned(4)));
 
+[[gnu::always_inline]] inline V4f load4(const float* p) {
+  return *reinterpret_cast<const V4fu*>(p);
+}
 [[gnu::always_inline]] inline V8f load8(const float* p) {
   return *reinterpret_cast<const V8fu*>(p);
 }
@@ -34,22 +37,18 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
   *reinterpret_cast<V4fu*>(p) = v;
 }
 
-// The eight partial sums of one field combined in double, in fit_sums' order.
-[[gnu::always_inline]] inline double total8(const float* l) {
-  return ((static_cast<double>(l[0]) + static_cast<double>(l[1])) +
-          (static_cast<double>(l[2]) + static_cast<double>(l[3]))) +
-         ((static_cast<double>(l[4]) + static_cast<double>(l[5])) +
-          (static_cast<double>(l[6]) + static_cast<double>(l[7])));
-}
-
-// Eight samples at a time from the padded arrays: lane l holds the partial sums of the samples
-// k = l mod 8, in sample order (the padding adds exact zeros).
+// Four samples at a time from the padded arrays, widened to double: lane l holds the partial
+// sums of the samples k = l mod 4, in sample order (the padding adds exact zeros); the lanes
+// are combined as (0 + 1) + (2 + 3).
 [[gnu::always_inline]] inline FitSums sums_impl(const FitSampleSet& q) {
-  V8f s0{}, sx{}, sy{}, sz{}, sxx{}, syy{}, szz{}, sxy{}, sxz{}, syz{};
+  V4d s0{}, sx{}, sy{}, sz{}, sxx{}, syy{}, szz{}, sxy{}, sxz{}, syz{};
   const float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data(), *pt = q.t.data();
-  for (std::size_t k = 0; k < q.n; k += kFitLanes) {
-    const V8f x = load8(px + k), y = load8(py + k), z = load8(pz + k), t = load8(pt + k);
-    const V8f tx = t * x, ty = t * y, tz = t * z;
+  for (std::size_t k = 0; k < q.n; k += 4) {
+    const V4d x = __builtin_convertvector(load4(px + k), V4d);
+    const V4d y = __builtin_convertvector(load4(py + k), V4d);
+    const V4d z = __builtin_convertvector(load4(pz + k), V4d);
+    const V4d t = __builtin_convertvector(load4(pt + k), V4d);
+    const V4d tx = t * x, ty = t * y, tz = t * z;
     s0 += t;
     sx += tx;
     sy += ty;
@@ -61,11 +60,7 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
     sxz += tx * z;
     syz += ty * z;
   }
-  auto total = [](V8f v) {
-    float l[kFitLanes];
-    std::memcpy(l, &v, sizeof l);
-    return total8(l);
-  };
+  auto total = [](V4d v) { return (v[0] + v[1]) + (v[2] + v[3]); };
   FitSums s;
   s.s0 = total(s0);
   s.sx = total(sx);
@@ -81,18 +76,19 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
 }
 
 // The terms of one sample, as fit_sums forms them, taken out of the sums.
-[[gnu::always_inline]] inline void downdate(FitSums& fs, float x, float y, float z, float t) {
-  const float tx = t * x, ty = t * y, tz = t * z;
-  fs.s0 -= static_cast<double>(t);
-  fs.sx -= static_cast<double>(tx);
-  fs.sy -= static_cast<double>(ty);
-  fs.sz -= static_cast<double>(tz);
-  fs.sxx -= static_cast<double>(tx * x);
-  fs.syy -= static_cast<double>(ty * y);
-  fs.szz -= static_cast<double>(tz * z);
-  fs.sxy -= static_cast<double>(tx * y);
-  fs.sxz -= static_cast<double>(tx * z);
-  fs.syz -= static_cast<double>(ty * z);
+[[gnu::always_inline]] inline void downdate(FitSums& fs, float xf, float yf, float zf, float tf) {
+  const double x = xf, y = yf, z = zf, t = tf;
+  const double tx = t * x, ty = t * y, tz = t * z;
+  fs.s0 -= t;
+  fs.sx -= tx;
+  fs.sy -= ty;
+  fs.sz -= tz;
+  fs.sxx -= tx * x;
+  fs.syy -= ty * y;
+  fs.szz -= tz * z;
+  fs.sxy -= tx * y;
+  fs.sxz -= tx * z;
+  fs.syz -= ty * z;
 }
 
 struct TrimPlaneF {
@@ -271,25 +267,26 @@ FitSums fit_sums(const FitSampleSet& samples) {
 }
 
 FitSums fit_sums_scalar(const FitSampleSet& samples) {
-  float part[10][kFitLanes] = {};
+  FitSums set[4];
   for (std::size_t k = 0; k < samples.n; ++k) {
-    const std::size_t l = k % kFitLanes;
-    const float x = samples.x[k], y = samples.y[k], z = samples.z[k], t = samples.t[k];
-    const float tx = t * x, ty = t * y, tz = t * z;
-    part[0][l] += t;
-    part[1][l] += tx;
-    part[2][l] += ty;
-    part[3][l] += tz;
-    part[4][l] += tx * x;
-    part[5][l] += ty * y;
-    part[6][l] += tz * z;
-    part[7][l] += tx * y;
-    part[8][l] += tx * z;
-    part[9][l] += ty * z;
+    FitSums& s = set[k % 4];
+    const double x = samples.x[k], y = samples.y[k], z = samples.z[k], t = samples.t[k];
+    s.s0 += t;
+    s.sx += t * x;
+    s.sy += t * y;
+    s.sz += t * z;
+    s.sxx += t * x * x;
+    s.syy += t * y * y;
+    s.szz += t * z * z;
+    s.sxy += t * x * y;
+    s.sxz += t * x * z;
+    s.syz += t * y * z;
   }
   FitSums s;
-  double* f[10] = {&s.s0, &s.sx, &s.sy, &s.sz, &s.sxx, &s.syy, &s.szz, &s.sxy, &s.sxz, &s.syz};
-  for (int i = 0; i < 10; ++i) *f[i] = total8(part[i]);
+  for (double FitSums::*f :
+       {&FitSums::s0, &FitSums::sx, &FitSums::sy, &FitSums::sz, &FitSums::sxx, &FitSums::syy,
+        &FitSums::szz, &FitSums::sxy, &FitSums::sxz, &FitSums::syz})
+    s.*f = (set[0].*f + set[1].*f) + (set[2].*f + set[3].*f);
   return s;
 }
 

@@ -46,13 +46,12 @@ struct FitSampleSet {
   void append_to(std::vector<FitSample>& out) const;         //!< the n samples, in double
 };
 
-//! The weighted sums of the fit (eq. 2) over the samples: sum t, sum t x, ..., sum t x x, ...,
-//! sum t x y, each product formed in float as (t x) y. Each sum is eight partial sums in float
-//! (sample k in partial k mod 8, in sample order), combined in double as
-//! ((0 + 1) + (2 + 3)) + ((4 + 5) + (6 + 7)): the vector path (AVX2 without fused multiply-add
-//! when the CPU has it) does the very same operations per sum, so it gives the scalar loop's
-//! results bit for bit. With some 100 samples a partial, a sum is within about 1e-5 of its
-//! exact value (relative); the fit's noise is far larger.
+//! The weighted sums of the fit (eq. 2) over the samples, in double (the samples widened):
+//! sum t, sum t x, ..., sum t x x, ..., sum t x y, each product formed as (t x) y. Each sum is
+//! four partial sums (sample k in partial k mod 4, in sample order), combined as
+//! (0 + 1) + (2 + 3): independent additions for the vector path (4 doubles a lane, AVX2 when
+//! the CPU has it), which does the very same operations per sum, so it gives the scalar loop's
+//! results bit for bit.
 struct FitSums {
   double s0 = 0, sx = 0, sy = 0, sz = 0;
   double sxx = 0, syy = 0, szz = 0;
@@ -77,7 +76,7 @@ struct TrimPlane {
 };
 //! Keeps the samples whose residual r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z) has
 //! !(r r > limit2), all in float (the plane rounded to float), moved down in order; takes the
-//! others' terms (the float products of fit_sums) out of `sums`, in sample order. Returns the
+//! others' terms (fit_sums' products, in double) out of `sums`, in sample order. Returns the
 //! count kept (and sets samples.n to it, padded). Vectorised (eight samples at a time with
 //! AVX2), with the scalar loop's operations: its results bit for bit.
 std::size_t trim_samples(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums);

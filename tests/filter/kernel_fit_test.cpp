@@ -13,8 +13,8 @@
 namespace scanclean::detail {
 namespace {
 
-// The fit works in float: samples given in double are rounded first. The oracles below get the
-// same rounded values.
+// The fit holds its samples in float (its sums are in double): samples given in double are
+// rounded first. The oracles below get the same rounded values.
 FitSample as_float(FitSample q) {
   return {static_cast<float>(q.x), static_cast<float>(q.y), static_cast<float>(q.z),
           static_cast<float>(q.t)};
@@ -75,14 +75,12 @@ TEST(KernelFitTest, MatchesTheDirectWeightedPca) {
   KernelFit fit;
   ASSERT_TRUE(fit_samples(s, centre, h, 8, 0.05, fit));
   EXPECT_EQ(s.size(), 200u);  // nothing beyond the trimming band
-  // The sums are float partial sums of some 25 products each: within about 25 x 6e-8 of the
-  // exact sums (relative), and the covariance within that of its largest entries (h^2 / 6).
-  EXPECT_NEAR(fit.weight, ref.weight, 2e-6 * ref.weight);
-  EXPECT_LT((fit.m - ref.m).norm(), 2e-6 * h);
-  EXPECT_LT((fit.c - (centre + ref.m)).norm(), 2e-6 * h);
-  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-5 * ref.cov.norm());
+  EXPECT_NEAR(fit.weight, ref.weight, 1e-12 * ref.weight);
+  EXPECT_LT((fit.m - ref.m).norm(), 1e-15);
+  EXPECT_LT((fit.c - (centre + ref.m)).norm(), 1e-12);
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(ref.cov);
-  for (int k = 0; k < 3; ++k) EXPECT_NEAR(fit.lambda[k], es.eigenvalues()[k], 1e-6 * h * h);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(fit.lambda[k], es.eigenvalues()[k], 1e-9 * h * h);
   // The normal is the eigenvector of the smallest eigenvalue (either sign).
   EXPECT_NEAR(std::abs(fit.e.col(0).dot(es.eigenvectors().col(0))), 1.0, 1e-9);
 }
@@ -99,8 +97,7 @@ TEST(KernelFitTest, TrimsANearOutlierFromTheFit) {
   KernelFit fit;
   ASSERT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), h, 8, 0.05, fit));
   EXPECT_EQ(s.size(), clean.size());
-  // As the clean fit, to float rounding of the sums (the outlier's terms taken out again).
-  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-5 * ref.cov.norm());
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-12 * ref.cov.norm());
 }
 
 TEST(KernelFitTest, TrimmedFitsEqualTheDirectPcaOfTheSamplesKept) {
@@ -120,9 +117,9 @@ TEST(KernelFitTest, TrimmedFitsEqualTheDirectPcaOfTheSamplesKept) {
   ASSERT_TRUE(fit_samples(s, Eigen::Vector3d::Zero(), h, 8, 0.05, fit));
   EXPECT_LT(s.size(), before);  // something was trimmed
   const Direct ref = direct_fit(s);
-  EXPECT_NEAR(fit.weight, ref.weight, 2e-6 * ref.weight);
-  EXPECT_LT((fit.m - ref.m).norm(), 2e-6 * h);
-  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-5 * ref.cov.norm());
+  EXPECT_NEAR(fit.weight, ref.weight, 1e-12 * ref.weight);
+  EXPECT_LT((fit.m - ref.m).norm(), 1e-12 * h);
+  EXPECT_LT((fit.cov - ref.cov).norm(), 1e-10 * ref.cov.norm());
 }
 
 TEST(KernelFitTest, TooFewSamplesGiveNoFit) {
