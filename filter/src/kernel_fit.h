@@ -29,12 +29,13 @@ struct FitSample {
   double x, y, z, t;
 };
 
-//! The lanes of the fit's vector loops.
+//! The padding of the fit's sample arrays: the trimming's vector width.
 constexpr std::size_t kFitLanes = 8;
 
 //! The neighbours of a fit as a struct of arrays in float (offsets from the centre point in
-//! metres, chi weights), the form the fit's loops read: eight at a time with AVX2. The entries
-//! from n to the next multiple of kFitLanes are zeros (pad()).
+//! metres, chi weights), the form the fit's loops read (with AVX2 the trimming eight at a time,
+//! the sums four, widened to double). The entries from n to the next multiple of kFitLanes are
+//! zeros (pad()).
 struct FitSampleSet {
   std::vector<float> x, y, z, t;
   std::size_t n = 0;
