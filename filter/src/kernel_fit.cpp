@@ -30,10 +30,10 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
 [[gnu::always_inline]] inline V8f load8(const float* p) {
   return *reinterpret_cast<const V8fu*>(p);
 }
-[[gnu::always_inline]] inline void store8(float* p, V8f v) {
+[[gnu::always_inline]] inline void store8(float* p, const V8f& v) {
   *reinterpret_cast<V8fu*>(p) = v;
 }
-[[gnu::always_inline]] inline void store4(float* p, V4f v) {
+[[gnu::always_inline]] inline void store4(float* p, const V4f& v) {
   *reinterpret_cast<V4fu*>(p) = v;
 }
 
@@ -60,7 +60,7 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
     sxz += tx * z;
     syz += ty * z;
   }
-  auto total = [](V4d v) { return (v[0] + v[1]) + (v[2] + v[3]); };
+  auto total = [](const V4d& v) { return (v[0] + v[1]) + (v[2] + v[3]); };
   FitSums s;
   s.s0 = total(s0);
   s.sx = total(sx);
