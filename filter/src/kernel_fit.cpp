@@ -6,7 +6,6 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 // The 8-wide helpers below return vectors by value; they are always inlined into functions
 // compiled for AVX2 or into their SSE2 twins, so the ABI note GCC gives for them does not apply.
@@ -153,7 +152,8 @@ struct TrimPlaneF {
 }
 
 // Four points at a time in double, as the scalar loop, then rounded to float; a block with all
-// four within h is stored with vector stores, the others point by point.
+// four within h is stored with vector stores, the others point by point; the last few (m not a
+// multiple of 4) by the scalar loop itself.
 [[gnu::always_inline]] inline std::size_t make_impl(const Eigen::Vector3d* p,
                                                     const std::uint32_t* js, std::size_t m,
                                                     const Eigen::Vector3d& c, double h2,
@@ -161,6 +161,7 @@ struct TrimPlaneF {
   const V4d cx = V4d{} + c.x(), cy = V4d{} + c.y(), cz = V4d{} + c.z();
   const V4d vh2 = V4d{} + h2, vinv = V4d{} + inv_h2, one = V4d{} + 1.0;
   float *ox = out.x.data(), *oy = out.y.data(), *oz = out.z.data(), *ot = out.t.data();
+  const std::size_t before = out.n;
   std::size_t n = out.n, k = 0;
   for (; k + 4 <= m; k += 4) {
     const Eigen::Vector3d& a = p[js[k]];
@@ -193,22 +194,10 @@ struct TrimPlaneF {
       n += in[l] != 0 ? 1 : 0;
     }
   }
-  for (; k < m; ++k) {
-    const Eigen::Vector3d dj = p[js[k]] - c;
-    const double r2 = (dj.x() * dj.x() + dj.y() * dj.y()) + dj.z() * dj.z();
-    if (!(r2 < h2)) continue;
-    double t = 1.0 - r2 * inv_h2;
-    t *= t;
-    t *= t;
-    ox[n] = static_cast<float>(dj.x());
-    oy[n] = static_cast<float>(dj.y());
-    oz[n] = static_cast<float>(dj.z());
-    ot[n] = static_cast<float>(t);
-    ++n;
-  }
-  const std::size_t added = n - out.n;
   out.n = n;
-  return added;
+  // The last few as the scalar loop (make_samples_scalar) makes them.
+  make_samples_scalar(p, js + k, m - k, c, h2, inv_h2, out);
+  return out.n - before;
 }
 
 // AVX2 without FMA: products and sums stay separately rounded, as in the scalar loops.

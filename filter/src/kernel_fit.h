@@ -156,7 +156,6 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
     if (m == kBlock) flush();
   });
   flush();
-  set.pad();
   if (untrimmed) {
     untrimmed->clear();
     set.append_to(*untrimmed);

@@ -25,15 +25,8 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
   // over the cloud in input order. The same neighbours, in the same order.
   PointSet ds;
   ds.v_orients_only = in.v_orients_only;
-  {
-    const std::vector<std::uint32_t>& order = index.order();
-    ds.p.resize(order.size());
-    if (!in.v.empty()) ds.v.resize(order.size());
-    parallel_each(order.size(), [&](std::size_t k) {
-      ds.p[k] = in.p[order[k]];
-      if (!in.v.empty()) ds.v[k] = in.v[order[k]];
-    });
-  }
+  ds.p = permuted(in.p, index.order());
+  if (!in.v.empty()) ds.v = permuted(in.v, index.order());
   auto sigma_at = [&](double hs) {
     ns.reach = std::max(ns.reach, hs * 1.0001);
     std::vector<double> sig(sigma_samples.size(), -1.0);

@@ -35,6 +35,14 @@ void parallel_each(std::size_t n, F&& f) {
                     });
 }
 
+//! from[order[k]] for each k, in parallel: values in another order (an index's slot order).
+template <class T>
+std::vector<T> permuted(const std::vector<T>& from, const std::vector<std::uint32_t>& order) {
+  std::vector<T> to(order.size());
+  parallel_each(order.size(), [&](std::size_t k) { to[k] = from[order[k]]; });
+  return to;
+}
+
 //! As parallel_each, in sequential chunks, reporting progress from the calling thread.
 template <class F>
 void parallel_each_reporting(std::size_t n, const FilterOptions& o, const std::string& phase,

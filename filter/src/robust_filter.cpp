@@ -93,14 +93,12 @@ detail::PointSet input_points(const PointCloud& input, const Eigen::Vector3d& or
 
 // Reorders `in` into the index order `order` (order[s] = input index of point s), freeing it.
 detail::PointSet reorder(detail::PointSet& in, const std::vector<std::uint32_t>& order) {
-  const std::size_t N = order.size();
   detail::PointSet d;
   d.h = in.h;
   d.v_orients_only = in.v_orients_only;
   auto move_into = [&](auto& from, auto& to) {
     if (from.empty()) return;
-    to.resize(N);
-    parallel_each(N, [&](std::size_t s) { to[s] = from[order[s]]; });
+    to = detail::permuted(from, order);
     std::remove_reference_t<decltype(from)>().swap(from);
   };
   move_into(in.p, d.p);

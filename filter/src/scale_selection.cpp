@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "neighbor_index.h"
+#include "parallel.h"
 
 namespace scanclean::detail {
 
@@ -62,12 +63,7 @@ std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const Ne
   // The positions in the index's slot order: the neighbours of a query sit in a few runs of
   // consecutive slots (read in input order, they were scattered over the whole cloud, and the
   // loop waited on the memory). The same neighbours, in the same order.
-  const std::vector<std::uint32_t>& order = index.order();
-  std::vector<Eigen::Vector3d> ps(order.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4096),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t k = r.begin(); k < r.end(); ++k) ps[k] = p[order[k]];
-                    });
+  const std::vector<Eigen::Vector3d> ps = permuted(p, index.order());
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, queries.size(), 64),
       [&](const tbb::blocked_range<std::size_t>& range) {

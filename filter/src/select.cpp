@@ -112,26 +112,21 @@ void band_scalar(const float* x, const float* y, const float* z, std::size_t n, 
                                        std::size_t& below, float* band, std::size_t& m) {
   const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
   const __m256 lo = _mm256_set1_ps(lo2), hi = _mm256_set1_ps(hi2);
-  std::size_t j = 0, count = 0;
-  for (; j + 8 <= n; j += 8) {
-    const __m256 d2 = squared_distances8(x + j, y + j, z + j, qx, qy, qz);
-    const __m256 under = _mm256_cmp_ps(d2, lo, _CMP_LT_OQ);
-    const __m256 in = _mm256_andnot_ps(under, _mm256_cmp_ps(d2, hi, _CMP_LT_OQ));
-    count += static_cast<std::size_t>(
-        __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under))));
-    // The band's lanes, left-packed; all 8 are stored, m advances by the selected.
-    m += store_left_packed(band + m, d2, static_cast<unsigned>(_mm256_movemask_ps(in)));
-  }
-  // The last few through masked loads, not a scalar loop: callers pass the runs of a cell's
-  // neighbourhood (about 24 points each at 2.1M), so the tails were a large share.
-  if (j < n) {
-    const __m256i lanes = lanes_below(n - j);
+  std::size_t count = 0;
+  // The last few points (n not a multiple of 8) through masked loads, not a scalar loop:
+  // callers pass the runs of a cell's neighbourhood (about 24 points each at 2.1M), so the tails
+  // were a large share.
+  for (std::size_t j = 0; j < n; j += 8) {
+    const bool whole = n - j >= 8;
+    const __m256i lanes = lanes_below(whole ? 8 : n - j);
     const unsigned valid = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(lanes)));
-    const __m256 d2 = squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
+    const __m256 d2 = whole ? squared_distances8(x + j, y + j, z + j, qx, qy, qz)
+                            : squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
     const __m256 under = _mm256_cmp_ps(d2, lo, _CMP_LT_OQ);
     const __m256 in = _mm256_andnot_ps(under, _mm256_cmp_ps(d2, hi, _CMP_LT_OQ));
     count += static_cast<std::size_t>(
         __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under)) & valid));
+    // The band's lanes, left-packed; all 8 are stored, m advances by the selected.
     m += store_left_packed(band + m, d2, static_cast<unsigned>(_mm256_movemask_ps(in)) & valid);
   }
   below += count;
@@ -159,30 +154,20 @@ void within_scalar(const float* x, const float* y, const float* z, const std::ui
   const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
   const __m256 rr = _mm256_set1_ps(r2), lm = _mm256_set1_ps(lik_max);
   __m256i sum = _mm256_setzero_si256();
-  std::size_t j = 0, within = 0, below = 0;
-  for (; j + 8 <= n; j += 8) {
-    const __m256 d2 = squared_distances8(x + j, y + j, z + j, qx, qy, qz);
-    const __m256 in = _mm256_cmp_ps(d2, rr, _CMP_LT_OQ);
-    const __m256i c = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt + j));
-    sum = _mm256_add_epi32(sum, _mm256_and_si256(c, _mm256_castps_si256(in)));
-    within +=
-        static_cast<std::size_t>(__builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(in))));
-    if (lik) {
-      const __m256 le = _mm256_and_ps(in, _mm256_cmp_ps(_mm256_loadu_ps(lik + j), lm, _CMP_LE_OQ));
-      below += static_cast<std::size_t>(
-          __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(le))));
-    }
-  }
-  if (j < n) {  // the last few through masked loads, as band_avx2
-    const __m256i lanes = lanes_below(n - j);
-    const __m256 d2 = squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
+  std::size_t within = 0, below = 0;
+  for (std::size_t j = 0; j < n; j += 8) {  // the last few through masked loads, as band_avx2
+    const bool whole = n - j >= 8;
+    const __m256i lanes = lanes_below(whole ? 8 : n - j);
+    const __m256 d2 = whole ? squared_distances8(x + j, y + j, z + j, qx, qy, qz)
+                            : squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
     const __m256 in = _mm256_and_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ), _mm256_castsi256_ps(lanes));
-    const __m256i c = _mm256_maskload_epi32(reinterpret_cast<const int*>(cnt + j), lanes);
+    const __m256i c = whole ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt + j))
+                            : _mm256_maskload_epi32(reinterpret_cast<const int*>(cnt + j), lanes);
     sum = _mm256_add_epi32(sum, _mm256_and_si256(c, _mm256_castps_si256(in)));
     within +=
         static_cast<std::size_t>(__builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(in))));
     if (lik) {
-      const __m256 l = _mm256_maskload_ps(lik + j, lanes);
+      const __m256 l = whole ? _mm256_loadu_ps(lik + j) : _mm256_maskload_ps(lik + j, lanes);
       const __m256 le = _mm256_and_ps(in, _mm256_cmp_ps(l, lm, _CMP_LE_OQ));
       below += static_cast<std::size_t>(
           __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(le))));
