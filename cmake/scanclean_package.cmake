@@ -48,6 +48,9 @@ foreach(m ${_sc_modules})
     elseif(dep MATCHES "^nanoflann::")
       set(_find "find_dependency(nanoflann)")
       set(_pc nanoflann)
+    elseif(dep MATCHES "^hwy::")
+      set(_find "find_dependency(hwy)")
+      set(_pc libhwy)
     elseif(dep MATCHES "^liblzf::")
       set(_find "find_dependency(liblzf)")
       set(_pc liblzf)
@@ -227,7 +230,7 @@ depth images and Gray-code structured light. Includes the Python module
 set(CPACK_DEBIAN_DEV_PACKAGE_NAME scanclean-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
 set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS
-  "scanclean (= ${PROJECT_VERSION}), libeigen3-dev, libnanoflann-dev, libtbb-dev, nlohmann-json3-dev, liblzf-dev, libopencv-dev, libopencv-contrib-dev, libopenni2-dev, libusb-1.0-0-dev, pkg-config")
+  "scanclean (= ${PROJECT_VERSION}), libeigen3-dev, libnanoflann-dev, libtbb-dev, libhwy-dev, nlohmann-json3-dev, liblzf-dev, libopencv-dev, libopencv-contrib-dev, libopenni2-dev, libusb-1.0-0-dev, pkg-config")
 set(CPACK_COMPONENT_DEV_DESCRIPTION "Development files of the scanclean libraries (robust filter, point-cloud
 I/O, recordings, range sources, capture pipeline): headers, static
 libraries, the CMake package config (find_package(scanclean)) and

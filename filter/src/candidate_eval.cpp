@@ -6,8 +6,6 @@
 #include <cstring>
 #include <limits>
 
-#include "avx2_select.h"
-
 // The 8-wide helpers below return vectors by value; they are always inlined into functions
 // compiled for AVX2 (see step_avx2), so the ABI note GCC gives for them does not apply.
 #pragma GCC diagnostic ignored "-Wpsabi"
@@ -289,69 +287,6 @@ double likelihood_sse(CandidateBuffer& b, const float x[3], float t2) {
   for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
-// AVX2 without FMA: the squared distances are rounded as in the scalar loop.
-[[gnu::target("avx2")]] std::size_t select_avx2(const float* x, const float* y, const float* z,
-                                                const std::uint32_t* slots, std::size_t n,
-                                                const float origin[3], float r2,
-                                                std::uint32_t* out) {
-  const __m256 ox = _mm256_set1_ps(origin[0]), oy = _mm256_set1_ps(origin[1]),
-               oz = _mm256_set1_ps(origin[2]), rr = _mm256_set1_ps(r2);
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; j += 8) {
-    const __m256 d2 = squared_distances8(x + j, y + j, z + j, ox, oy, oz);
-    const unsigned mask =
-        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ)));
-    // All 8 are stored at m <= j (so within n), the count advances by the selected.
-    m += store_left_packed(out + m, slots + j, mask);
-  }
-  return m;
-}
-
-// AVX2 without FMA, rounded as reach_scalar.
-[[gnu::target("avx2")]] std::size_t reach_avx2(const float* x, const float* y, const float* z,
-                                               const float* sigma, const std::uint32_t* slots,
-                                               std::size_t n, const float origin[3], float r2,
-                                               float scale, float margin, std::uint32_t* out) {
-  const __m256 ox = _mm256_set1_ps(origin[0]), oy = _mm256_set1_ps(origin[1]),
-               oz = _mm256_set1_ps(origin[2]), rr = _mm256_set1_ps(r2);
-  const __m256 sc = _mm256_set1_ps(scale), mg = _mm256_set1_ps(margin);
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; j += 8) {
-    const __m256 d2 = squared_distances8(x + j, y + j, z + j, ox, oy, oz);
-    const __m256 reach = _mm256_add_ps(_mm256_mul_ps(sc, _mm256_loadu_ps(sigma + j)), mg);
-    const __m256 in = _mm256_and_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ),
-                                    _mm256_cmp_ps(d2, _mm256_mul_ps(reach, reach), _CMP_LT_OQ));
-    m += store_left_packed(out + m, slots + j, static_cast<unsigned>(_mm256_movemask_ps(in)));
-  }
-  return m;
-}
-
-std::size_t reach_scalar(const float* x, const float* y, const float* z, const float* sigma,
-                         const std::uint32_t* slots, std::size_t n, const float origin[3], float r2,
-                         float scale, float margin, std::uint32_t* out) {
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; ++j) {
-    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
-    const float d2 = dx * dx + dy * dy + dz * dz;
-    const float reach = scale * sigma[j] + margin;
-    out[m] = slots[j];
-    m += d2 < r2 && d2 < reach * reach ? 1u : 0u;
-  }
-  return m;
-}
-
-std::size_t select_scalar(const float* x, const float* y, const float* z,
-                          const std::uint32_t* slots, std::size_t n, const float origin[3],
-                          float r2, std::uint32_t* out) {
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; ++j) {
-    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
-    out[m] = slots[j];
-    m += dx * dx + dy * dy + dz * dz < r2 ? 1u : 0u;
-  }
-  return m;
-}
-
 bool have_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
   return yes;
@@ -391,20 +326,6 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
     for (std::size_t k = 0; k < n; ++k)
       buffer.push_record(slots[k], records[slots[k]], origin, slab2);
   }
-}
-
-std::size_t select_within(const float* x, const float* y, const float* z,
-                          const std::uint32_t* slots, std::size_t n, const float origin[3],
-                          float r2, std::uint32_t* out) {
-  return have_avx2() ? select_avx2(x, y, z, slots, n, origin, r2, out)
-                     : select_scalar(x, y, z, slots, n, origin, r2, out);
-}
-
-std::size_t select_within_reach(const float* x, const float* y, const float* z, const float* sigma,
-                                const std::uint32_t* slots, std::size_t n, const float origin[3],
-                                float r2, float scale, float margin, std::uint32_t* out) {
-  return have_avx2() ? reach_avx2(x, y, z, sigma, slots, n, origin, r2, scale, margin, out)
-                     : reach_scalar(x, y, z, sigma, slots, n, origin, r2, scale, margin, out);
 }
 
 float fast_exp(float a) {

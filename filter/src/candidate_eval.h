@@ -103,20 +103,6 @@ bool step_sums_after_min_mahalanobis(CandidateBuffer& buffer, const float nref[3
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
-//! Writes to out, in order, the slots[j] of the points (x[j], y[j], z[j]), j < n, whose
-//! squared distance to origin, (dx dx + dy dy) + dz dz in float without fused multiply-add (as
-//! a plain scalar loop computes it), is below r2; returns their count. n a multiple of 8
-//! (pad with +inf coordinates); out holds n entries (past the count it is scratch).
-std::size_t select_within(const float* x, const float* y, const float* z,
-                          const std::uint32_t* slots, std::size_t n, const float origin[3],
-                          float r2, std::uint32_t* out);
-//! As select_within, keeping only the points j that also lie within scale sigma[j] + margin of
-//! origin: with reach = scale sigma[j] + margin in float, d2 < r2 and d2 < reach reach. For
-//! kernel centres with sigma_j (KernelRecord::kSigma) and scale = the truncation: the kernels
-//! that can reach a point within margin of origin.
-std::size_t select_within_reach(const float* x, const float* y, const float* z, const float* sigma,
-                                const std::uint32_t* slots, std::size_t n, const float origin[3],
-                                float r2, float scale, float margin, std::uint32_t* out);
 //! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error below 5e-7 on
 //! [-10, 0], where the loops use it; up to 4e-6 towards -80, from rounding a log2(e) in float).
 float fast_exp(float a);

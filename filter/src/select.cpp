@@ -1,53 +1,245 @@
 #include "select.h"
 
-#include <immintrin.h>
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 
-#include "avx2_select.h"
+// The loops over points are written once with Google Highway and compiled for every instruction
+// set it targets on the build machine's architecture (x86: AVX-512, AVX2, SSE4, SSSE3 and a
+// portable fallback; ARM: NEON, SVE, ...); the best one the processor has runs. Vectors are
+// capped at 8 floats, the padding the callers provide. This file is compiled without
+// floating-point contraction (filter/CMakeLists.txt), so every target rounds a squared distance
+// as (dx dx + dy dy) + dz dz in float, as a plain loop does: the selections are the same on
+// every processor.
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "select.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
 
+HWY_BEFORE_NAMESPACE();
 namespace scanclean::detail {
-namespace {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
 
-bool have_avx2();
+using D = hn::CappedTag<float, 8>;
+using DU = hn::RebindToUnsigned<D>;
+using V = hn::Vec<D>;
+using M = hn::Mask<D>;
 
-// The value of rank k among v[0, n) by counting, for each candidate, the values below it and at
-// or below it (8 at a time, the tail one by one); false when no value has rank k (a NaN among
-// them: comparisons with it are all false).
-[[gnu::target("avx2")]] bool rank_select_avx2(const float* v, std::size_t n, std::size_t k,
-                                              float& out) {
-  const std::size_t full = n - n % 8;
+// The lanes [j, j + N) of p, of which those of `in` (the first n - j) are read; the others are
+// zero. x86's AVX2 and AVX-512 load the lanes of a mask alone; on the other targets a masked
+// load may read the whole vector (and fault past the array's end), so a tail is copied first.
+HWY_INLINE V load(D d, const float* p, bool whole, M in) {
+  if (whole) return hn::LoadU(d, p);
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2
+  return hn::MaskedLoad(in, d, p);
+#else
+  HWY_ALIGN float tail[8] = {};
+  const std::size_t n = hn::CountTrue(d, in);
+  for (std::size_t k = 0; k < n; ++k) tail[k] = p[k];
+  return hn::Load(d, tail);
+#endif
+}
+HWY_INLINE hn::Vec<DU> load(DU du, const std::uint32_t* p, bool whole, hn::Mask<DU> in) {
+  if (whole) return hn::LoadU(du, p);
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2
+  return hn::MaskedLoad(in, du, p);
+#else
+  HWY_ALIGN std::uint32_t tail[8] = {};
+  const std::size_t n = hn::CountTrue(du, in);
+  for (std::size_t k = 0; k < n; ++k) tail[k] = p[k];
+  return hn::Load(du, tail);
+#endif
+}
+
+// Stores the lanes of v selected by `keep` at p, in order, and returns their number; the whole
+// vector is stored (p needs room for N). Compress in a register, then a plain store: AVX-512's
+// compressing store to memory (hn::CompressStore there) is microcoded on AMD's Zen 4 and made
+// the scale phase of the 2.1M sphere four times slower.
+template <class DV>
+HWY_INLINE std::size_t compress_store(hn::Vec<DV> v, hn::Mask<DV> keep, DV dv, hn::TFromD<DV>* p) {
+  hn::StoreU(hn::Compress(v, keep), dv, p);
+  return hn::CountTrue(dv, keep);
+}
+
+// |p - q|^2 rounded as (dx dx + dy dy) + dz dz.
+HWY_INLINE V squared_distance(V px, V py, V pz, V qx, V qy, V qz) {
+  const V dx = hn::Sub(px, qx), dy = hn::Sub(py, qy), dz = hn::Sub(pz, qz);
+  return hn::Add(hn::Add(hn::Mul(dx, dx), hn::Mul(dy, dy)), hn::Mul(dz, dz));
+}
+
+// The value of rank k among v[0, n) by counting, for each value, those below it and at or below
+// it; false when no value has rank k (a NaN among them: comparisons with it are all false).
+bool RankSelect(const float* v, std::size_t n, std::size_t k, float* out) {
+  const D d;
+  const std::size_t N = hn::Lanes(d);
   for (std::size_t i = 0; i < n; ++i) {
-    const __m256 x = _mm256_set1_ps(v[i]);
+    const V x = hn::Set(d, v[i]);
     std::size_t lt = 0, le = 0;
-    for (std::size_t j = 0; j < full; j += 8) {
-      const __m256 y = _mm256_loadu_ps(v + j);
-      lt += static_cast<std::size_t>(__builtin_popcount(
-          static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(y, x, _CMP_LT_OQ)))));
-      le += static_cast<std::size_t>(__builtin_popcount(
-          static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(y, x, _CMP_LE_OQ)))));
-    }
-    for (std::size_t j = full; j < n; ++j) {
-      lt += v[j] < v[i] ? 1 : 0;
-      le += v[j] <= v[i] ? 1 : 0;
+    for (std::size_t j = 0; j < n; j += N) {
+      const M in = hn::FirstN(d, n - j);
+      const V y = load(d, v + j, n - j >= N, in);
+      lt += hn::CountTrue(d, hn::And(hn::Lt(y, x), in));
+      le += hn::CountTrue(d, hn::And(hn::Le(y, x), in));
     }
     if (lt <= k && k < le) {
-      out = v[i];
+      *out = v[i];
       return true;
     }
   }
   return false;
 }
 
-}  // namespace
+void Band(const float* x, const float* y, const float* z, std::size_t n, const float* q, float lo2,
+          float hi2, std::size_t* below, float* band, std::size_t* m) {
+  const D d;
+  const std::size_t N = hn::Lanes(d);
+  const V qx = hn::Set(d, q[0]), qy = hn::Set(d, q[1]), qz = hn::Set(d, q[2]);
+  const V lo = hn::Set(d, lo2), hi = hn::Set(d, hi2);
+  std::size_t count = 0, k = *m;
+  // The last few points (n not a multiple of N) through masked loads, not a scalar loop:
+  // callers pass the runs of a cell's neighbourhood (about 24 points each at 2.1M), so the tails
+  // were a large share.
+  for (std::size_t j = 0; j < n; j += N) {
+    const bool whole = n - j >= N;
+    const M in = hn::FirstN(d, n - j);
+    const V d2 = squared_distance(load(d, x + j, whole, in), load(d, y + j, whole, in),
+                                  load(d, z + j, whole, in), qx, qy, qz);
+    const M under = hn::And(hn::Lt(d2, lo), in);
+    count += hn::CountTrue(d, under);
+    // The band's lanes, compressed to the front; a whole vector may be stored.
+    k += compress_store(d2, hn::AndNot(under, hn::And(hn::Lt(d2, hi), in)), d, band + k);
+  }
+  *below += count;
+  *m = k;
+}
+
+// The cnt lanes sum in 32 bits (the caller keeps a call's sum below 2^32).
+void Within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
+            const float* lik, std::size_t n, const float* q, float r2, float lik_max,
+            WithinCounts* out) {
+  const D d;
+  const DU du;
+  const std::size_t N = hn::Lanes(d);
+  const V qx = hn::Set(d, q[0]), qy = hn::Set(d, q[1]), qz = hn::Set(d, q[2]);
+  const V rr = hn::Set(d, r2), lm = hn::Set(d, lik_max);
+  auto sum = hn::Zero(du);
+  std::size_t within = 0, below = 0;
+  for (std::size_t j = 0; j < n; j += N) {  // the last few through masked loads, as Band
+    const bool whole = n - j >= N;
+    const M valid = hn::FirstN(d, n - j);
+    const V d2 = squared_distance(load(d, x + j, whole, valid), load(d, y + j, whole, valid),
+                                  load(d, z + j, whole, valid), qx, qy, qz);
+    const M in = hn::And(hn::Lt(d2, rr), valid);
+    const auto inu = hn::RebindMask(du, in);
+    const auto c = load(du, cnt + j, whole, hn::RebindMask(du, valid));
+    sum = hn::Add(sum, hn::IfThenElseZero(inu, c));
+    within += hn::CountTrue(d, in);
+    if (lik) below += hn::CountTrue(d, hn::And(in, hn::Le(load(d, lik + j, whole, valid), lm)));
+  }
+  out->sum += hn::GetLane(hn::SumOfLanes(du, sum));
+  out->n += within;
+  out->at_or_below += below;
+}
+
+// The squared distance from the points to the box [lo, hi]: the gaps per axis, rounded in
+// float.
+void NearBox(const float* x, const float* y, const float* z, const std::uint32_t* slot,
+             const float* extra, std::size_t n, const float* lo, const float* hi, float r2,
+             NearBoxOut* out, std::size_t* m) {
+  const D d;
+  const DU du;
+  const std::size_t N = hn::Lanes(d);
+  const V lx = hn::Set(d, lo[0]), ly = hn::Set(d, lo[1]), lz = hn::Set(d, lo[2]);
+  const V hx = hn::Set(d, hi[0]), hy = hn::Set(d, hi[1]), hz = hn::Set(d, hi[2]);
+  const V rr = hn::Set(d, r2), zero = hn::Zero(d);
+  std::size_t k = *m;
+  // The last few points (n not a multiple of N) through masked loads, which read nothing past
+  // the arrays: runs of a cell's neighbourhood are short, and a scalar tail took a fifth of the
+  // time.
+  for (std::size_t j = 0; j < n; j += N) {
+    const bool whole = n - j >= N;
+    const M valid = hn::FirstN(d, n - j);
+    const V px = load(d, x + j, whole, valid), py = load(d, y + j, whole, valid),
+            pz = load(d, z + j, whole, valid);
+    const V ex = hn::Max(hn::Max(hn::Sub(lx, px), hn::Sub(px, hx)), zero);
+    const V ey = hn::Max(hn::Max(hn::Sub(ly, py), hn::Sub(py, hy)), zero);
+    const V ez = hn::Max(hn::Max(hn::Sub(lz, pz), hn::Sub(pz, hz)), zero);
+    const V g2 = hn::Add(hn::Add(hn::Mul(ex, ex), hn::Mul(ey, ey)), hn::Mul(ez, ez));
+    const M keep = hn::And(hn::Lt(g2, rr), valid);
+    if (hn::AllFalse(d, keep)) continue;
+    if (slot) {
+      compress_store(load(du, slot + j, whole, hn::RebindMask(du, valid)), hn::RebindMask(du, keep),
+                     du, out->slot + k);
+    }
+    if (extra) compress_store(load(d, extra + j, whole, valid), keep, d, out->extra + k);
+    compress_store(px, keep, d, out->x + k);
+    compress_store(py, keep, d, out->y + k);
+    k += compress_store(pz, keep, d, out->z + k);
+  }
+  *m = k;
+}
+
+// n a multiple of 8 (padded), so of N: whole vectors only.
+std::size_t Within8(const float* x, const float* y, const float* z, const std::uint32_t* slots,
+                    std::size_t n, const float* origin, float r2, std::uint32_t* out) {
+  const D d;
+  const DU du;
+  const std::size_t N = hn::Lanes(d);
+  const V ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
+  const V rr = hn::Set(d, r2);
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; j += N) {
+    const V d2 =
+        squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
+    // A whole vector is stored at m <= j (so within n); the count advances by the selected.
+    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, hn::Lt(d2, rr)), du, out + m);
+  }
+  return m;
+}
+
+std::size_t Reach8(const float* x, const float* y, const float* z, const float* sigma,
+                   const std::uint32_t* slots, std::size_t n, const float* origin, float r2,
+                   float scale, float margin, std::uint32_t* out) {
+  const D d;
+  const DU du;
+  const std::size_t N = hn::Lanes(d);
+  const V ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
+  const V rr = hn::Set(d, r2), sc = hn::Set(d, scale), mg = hn::Set(d, margin);
+  std::size_t m = 0;
+  for (std::size_t j = 0; j < n; j += N) {
+    const V d2 =
+        squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
+    const V reach = hn::Add(hn::Mul(sc, hn::LoadU(d, sigma + j)), mg);
+    const M in = hn::And(hn::Lt(d2, rr), hn::Lt(d2, hn::Mul(reach, reach)));
+    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, in), du, out + m);
+  }
+  return m;
+}
+
+const char* Target() {
+  return hwy::TargetName(HWY_TARGET);
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace scanclean::detail
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace scanclean::detail {
+
+HWY_EXPORT(RankSelect);
+HWY_EXPORT(Band);
+HWY_EXPORT(Within);
+HWY_EXPORT(NearBox);
+HWY_EXPORT(Within8);
+HWY_EXPORT(Reach8);
 
 float kth_smallest_small(float* v, std::size_t n, std::size_t k) {
   float out = 0;
-  if (n <= kSmallSelect && have_avx2() && rank_select_avx2(v, n, k, out)) return out;
+  if (n <= kSmallSelect && HWY_DYNAMIC_DISPATCH(RankSelect)(v, n, k, &out)) return out;
   std::nth_element(v, v + k, v + n);
   return v[k];
 }
@@ -93,185 +285,16 @@ float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
   return kth_smallest_between(v, n, k, 0.0f, upper);
 }
 
-namespace {
-
-void band_scalar(const float* x, const float* y, const float* z, std::size_t n, const float q[3],
-                 float lo2, float hi2, std::size_t& below, float* band, std::size_t& m) {
-  for (std::size_t j = 0; j < n; ++j) {
-    const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
-    const float d2 = dx * dx + dy * dy + dz * dz;
-    below += d2 < lo2 ? 1 : 0;
-    band[m] = d2;
-    m += (d2 >= lo2 && d2 < hi2) ? 1 : 0;
-  }
-}
-
-// AVX2 without FMA, so the squared distances round as in band_scalar.
-[[gnu::target("avx2")]] void band_avx2(const float* x, const float* y, const float* z,
-                                       std::size_t n, const float q[3], float lo2, float hi2,
-                                       std::size_t& below, float* band, std::size_t& m) {
-  const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
-  const __m256 lo = _mm256_set1_ps(lo2), hi = _mm256_set1_ps(hi2);
-  std::size_t count = 0;
-  // The last few points (n not a multiple of 8) through masked loads, not a scalar loop:
-  // callers pass the runs of a cell's neighbourhood (about 24 points each at 2.1M), so the tails
-  // were a large share.
-  for (std::size_t j = 0; j < n; j += 8) {
-    const bool whole = n - j >= 8;
-    const __m256i lanes = lanes_below(whole ? 8 : n - j);
-    const unsigned valid = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(lanes)));
-    const __m256 d2 = whole ? squared_distances8(x + j, y + j, z + j, qx, qy, qz)
-                            : squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
-    const __m256 under = _mm256_cmp_ps(d2, lo, _CMP_LT_OQ);
-    const __m256 in = _mm256_andnot_ps(under, _mm256_cmp_ps(d2, hi, _CMP_LT_OQ));
-    count += static_cast<std::size_t>(
-        __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(under)) & valid));
-    // The band's lanes, left-packed; all 8 are stored, m advances by the selected.
-    m += store_left_packed(band + m, d2, static_cast<unsigned>(_mm256_movemask_ps(in)) & valid);
-  }
-  below += count;
-}
-
-void within_scalar(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
-                   const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
-                   WithinCounts& out) {
-  for (std::size_t j = 0; j < n; ++j) {
-    const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
-    const float d2 = dx * dx + dy * dy + dz * dz;
-    if (!(d2 < r2)) continue;
-    out.sum += cnt[j];
-    ++out.n;
-    if (lik) out.at_or_below += lik[j] <= lik_max ? 1 : 0;
-  }
-}
-
-// AVX2 without FMA, so the squared distances round as in within_scalar. The cnt lanes sum in
-// 32 bits (the caller keeps a call's sum below 2^32).
-[[gnu::target("avx2")]] void within_avx2(const float* x, const float* y, const float* z,
-                                         const std::uint32_t* cnt, const float* lik, std::size_t n,
-                                         const float q[3], float r2, float lik_max,
-                                         WithinCounts& out) {
-  const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
-  const __m256 rr = _mm256_set1_ps(r2), lm = _mm256_set1_ps(lik_max);
-  __m256i sum = _mm256_setzero_si256();
-  std::size_t within = 0, below = 0;
-  for (std::size_t j = 0; j < n; j += 8) {  // the last few through masked loads, as band_avx2
-    const bool whole = n - j >= 8;
-    const __m256i lanes = lanes_below(whole ? 8 : n - j);
-    const __m256 d2 = whole ? squared_distances8(x + j, y + j, z + j, qx, qy, qz)
-                            : squared_distances8_masked(x + j, y + j, z + j, qx, qy, qz, lanes);
-    const __m256 in = _mm256_and_ps(_mm256_cmp_ps(d2, rr, _CMP_LT_OQ), _mm256_castsi256_ps(lanes));
-    const __m256i c = whole ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt + j))
-                            : _mm256_maskload_epi32(reinterpret_cast<const int*>(cnt + j), lanes);
-    sum = _mm256_add_epi32(sum, _mm256_and_si256(c, _mm256_castps_si256(in)));
-    within +=
-        static_cast<std::size_t>(__builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(in))));
-    if (lik) {
-      const __m256 l = whole ? _mm256_loadu_ps(lik + j) : _mm256_maskload_ps(lik + j, lanes);
-      const __m256 le = _mm256_and_ps(in, _mm256_cmp_ps(l, lm, _CMP_LE_OQ));
-      below += static_cast<std::size_t>(
-          __builtin_popcount(static_cast<unsigned>(_mm256_movemask_ps(le))));
-    }
-  }
-  alignas(32) std::uint32_t lanes[8];
-  _mm256_store_si256(reinterpret_cast<__m256i*>(lanes), sum);
-  std::uint32_t total = 0;
-  for (std::uint32_t v : lanes) total += v;
-  out.sum += total;
-  out.n += within;
-  out.at_or_below += below;
-}
-
-// The squared distance from p to the box [lo, hi]: the gaps per axis, rounded in float.
-inline float box_gap2(float x, float y, float z, const float lo[3], const float hi[3]) {
-  const float ex = std::max(std::max(lo[0] - x, x - hi[0]), 0.0f);
-  const float ey = std::max(std::max(lo[1] - y, y - hi[1]), 0.0f);
-  const float ez = std::max(std::max(lo[2] - z, z - hi[2]), 0.0f);
-  return ex * ex + ey * ey + ez * ez;
-}
-
-// The kept points' coordinates, and their values of `slot` and `extra` when not null.
-void near_box_scalar(const float* x, const float* y, const float* z, const std::uint32_t* slot,
-                     const float* extra, std::size_t n, const float lo[3], const float hi[3],
-                     float r2, NearBoxOut& out, std::size_t& m) {
-  for (std::size_t j = 0; j < n; ++j) {
-    out.x[m] = x[j];
-    out.y[m] = y[j];
-    out.z[m] = z[j];
-    if (slot) out.slot[m] = slot[j];
-    if (extra) out.extra[m] = extra[j];
-    m += box_gap2(x[j], y[j], z[j], lo, hi) < r2 ? 1 : 0;
-  }
-}
-
-// AVX2 without FMA, so the squared gaps round as in near_box_scalar.
-[[gnu::target("avx2")]] void near_box_avx2(const float* x, const float* y, const float* z,
-                                           const std::uint32_t* slot, const float* extra,
-                                           std::size_t n, const float lo[3], const float hi[3],
-                                           float r2, NearBoxOut& out, std::size_t& m) {
-  const __m256 lx = _mm256_set1_ps(lo[0]), ly = _mm256_set1_ps(lo[1]), lz = _mm256_set1_ps(lo[2]);
-  const __m256 hx = _mm256_set1_ps(hi[0]), hy = _mm256_set1_ps(hi[1]), hz = _mm256_set1_ps(hi[2]);
-  const __m256 rr = _mm256_set1_ps(r2), zero = _mm256_setzero_ps();
-  // The last few points (n not a multiple of 8) through masked loads, which read nothing past
-  // the arrays: runs of a cell's neighbourhood are short, and a scalar tail took a fifth of the
-  // time.
-  for (std::size_t j = 0; j < n; j += 8) {
-    const std::size_t left = n - j;
-    const bool whole = left >= 8;
-    const __m256i in = lanes_below(whole ? 8 : left);
-    const __m256 px = whole ? _mm256_loadu_ps(x + j) : _mm256_maskload_ps(x + j, in);
-    const __m256 py = whole ? _mm256_loadu_ps(y + j) : _mm256_maskload_ps(y + j, in);
-    const __m256 pz = whole ? _mm256_loadu_ps(z + j) : _mm256_maskload_ps(z + j, in);
-    const __m256 ex =
-        _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(lx, px), _mm256_sub_ps(px, hx)), zero);
-    const __m256 ey =
-        _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(ly, py), _mm256_sub_ps(py, hy)), zero);
-    const __m256 ez =
-        _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(lz, pz), _mm256_sub_ps(pz, hz)), zero);
-    const __m256 g2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ex, ex), _mm256_mul_ps(ey, ey)),
-                                    _mm256_mul_ps(ez, ez));
-    const unsigned mask =
-        static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(g2, rr, _CMP_LT_OQ))) &
-        static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(in)));
-    if (mask == 0) continue;
-    if (slot)
-      store_left_packed(out.slot + m,
-                        whole ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slot + j))
-                              : _mm256_maskload_epi32(reinterpret_cast<const int*>(slot + j), in),
-                        mask);
-    if (extra)
-      store_left_packed(out.extra + m,
-                        whole ? _mm256_loadu_ps(extra + j) : _mm256_maskload_ps(extra + j, in),
-                        mask);
-    store_left_packed(out.x + m, px, mask);
-    store_left_packed(out.y + m, py, mask);
-    m += store_left_packed(out.z + m, pz, mask);
-  }
-}
-
-bool have_avx2() {
-  static const bool yes = __builtin_cpu_supports("avx2");
-  return yes;
-}
-
-}  // namespace
-
 void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
                           const float q[3], float lo2, float hi2, std::size_t& below, float* band,
                           std::size_t& m) {
-  if (have_avx2())
-    band_avx2(x, y, z, n, q, lo2, hi2, below, band, m);
-  else
-    band_scalar(x, y, z, n, q, lo2, hi2, below, band, m);
+  HWY_DYNAMIC_DISPATCH(Band)(x, y, z, n, q, lo2, hi2, &below, band, &m);
 }
 
 void select_near_box(const float* x, const float* y, const float* z, const std::uint32_t* slot,
                      const float* extra, std::size_t n, const float lo[3], const float hi[3],
                      float r2, NearBoxOut out, std::size_t& m) {
-  if (have_avx2())
-    near_box_avx2(x, y, z, slot, extra, n, lo, hi, r2, out, m);
-  else
-    near_box_scalar(x, y, z, slot, extra, n, lo, hi, r2, out, m);
+  HWY_DYNAMIC_DISPATCH(NearBox)(x, y, z, slot, extra, n, lo, hi, r2, &out, &m);
 }
 
 bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {
@@ -290,10 +313,20 @@ bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {
 void count_within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
                   const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
                   WithinCounts& out) {
-  if (have_avx2())
-    within_avx2(x, y, z, cnt, lik, n, q, r2, lik_max, out);
-  else
-    within_scalar(x, y, z, cnt, lik, n, q, r2, lik_max, out);
+  HWY_DYNAMIC_DISPATCH(Within)(x, y, z, cnt, lik, n, q, r2, lik_max, &out);
+}
+
+std::size_t select_within(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out) {
+  return HWY_DYNAMIC_DISPATCH(Within8)(x, y, z, slots, n, origin, r2, out);
+}
+
+std::size_t select_within_reach(const float* x, const float* y, const float* z, const float* sigma,
+                                const std::uint32_t* slots, std::size_t n, const float origin[3],
+                                float r2, float scale, float margin, std::uint32_t* out) {
+  return HWY_DYNAMIC_DISPATCH(Reach8)(x, y, z, sigma, slots, n, origin, r2, scale, margin, out);
 }
 
 }  // namespace scanclean::detail
+#endif  // HWY_ONCE

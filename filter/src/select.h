@@ -1,7 +1,10 @@
 #pragma once
 //! Internal: exact selections of the k-th smallest value, faster than std::nth_element (by
-//! counting for a few values, by bins when their range is known), and the 8-wide distance counts
-//! that feed them (the adaptive scale's bands, the outlier tests' sums).
+//! counting for a few values, by bins when their range is known), the distance counts that feed
+//! them (the adaptive scale's bands, the outlier tests' sums), and the selections of points by
+//! distance (the candidate kernels, the cell caches). The loops over points are vectorised with
+//! Google Highway for the processor the program runs on, in vectors of at most 8 floats; every
+//! target rounds as a plain scalar loop does, so the results are the same on every processor.
 
 #include <cstddef>
 #include <cstdint>
@@ -9,9 +12,9 @@
 namespace scanclean::detail {
 
 //! The k-th smallest (0-based rank) of v[0, n), k < n: the value std::nth_element would put at
-//! v[k]. For n <= kSmallSelect by counting (AVX2: for each value, how many lie below it and at or
-//! below it; about twice as fast as std::nth_element at 36 values), else, or without AVX2 or
-//! with a NaN among the values, std::nth_element (which may reorder v).
+//! v[k]. For n <= kSmallSelect by counting (for each value, how many lie below it and at or
+//! below it; about twice as fast as std::nth_element at 36 values), else, or with a NaN among
+//! the values, std::nth_element (which may reorder v).
 constexpr std::size_t kSmallSelect = 64;
 float kth_smallest_small(float* v, std::size_t n, std::size_t k);
 
@@ -30,7 +33,7 @@ float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, 
 //! The squared distances d2_j = |p_j - q|^2 of the n points p_j = (x[j], y[j], z[j]), rounded
 //! as (dx dx + dy dy) + dz dz in float: adds to `below` the number with d2_j < lo2, and appends
 //! to band[m, ...) those with lo2 <= d2_j < hi2 (m grows by their number; band needs room for
-//! m + n + 8 values). AVX2 where the processor has it, else scalar; the same results either way.
+//! m + n + 8 values).
 //! With the count below a band that brackets rank k (below <= k < below + m), the k-th
 //! smallest of all the d2 is the (k - below)-th smallest of the band.
 void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
@@ -49,8 +52,7 @@ struct NearBoxOut {
 //! multiply-add) is below r2, in order, with slot[j] and extra[j] when those are not null; m
 //! grows by their number. A point's squared distance so rounded is at most its squared distance
 //! to any q inside the box as count_below_and_band and select_within round it (float rounding
-//! is monotone), so the points within r of such a q are all kept when r * r <= r2. AVX2 or
-//! scalar, the same results.
+//! is monotone), so the points within r of such a q are all kept when r * r <= r2.
 void select_near_box(const float* x, const float* y, const float* z, const std::uint32_t* slot,
                      const float* extra, std::size_t n, const float lo[3], const float hi[3],
                      float r2, NearBoxOut out, std::size_t& m);
@@ -71,10 +73,24 @@ struct WithinCounts {
 //! Over the n points p_j = (x[j], y[j], z[j]) with d2_j = |p_j - q|^2 < r2, rounded as in
 //! count_below_and_band: adds cnt[j] to out.sum, 1 to out.n, and 1 to out.at_or_below where
 //! lik[j] <= lik_max (lik null: none). One pass, no list of the points: the density and
-//! likelihood-ratio sums of the outlier tests. AVX2 or scalar, the same results. The cnt values
-//! of one call must sum below 2^32.
+//! likelihood-ratio sums of the outlier tests. The cnt values of one call must sum below 2^32.
 void count_within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
                   const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
                   WithinCounts& out);
+
+//! Writes to out, in order, the slots[j] of the points (x[j], y[j], z[j]), j < n, whose
+//! squared distance to origin, (dx dx + dy dy) + dz dz in float without fused multiply-add (as
+//! a plain scalar loop computes it), is below r2; returns their count. n a multiple of 8
+//! (pad with +inf coordinates); out holds n entries (past the count it is scratch).
+std::size_t select_within(const float* x, const float* y, const float* z,
+                          const std::uint32_t* slots, std::size_t n, const float origin[3],
+                          float r2, std::uint32_t* out);
+//! As select_within, keeping only the points j that also lie within scale sigma[j] + margin of
+//! origin: with reach = scale sigma[j] + margin in float, d2 < r2 and d2 < reach reach. For
+//! kernel centres with sigma_j (KernelRecord::kSigma) and scale = the truncation: the kernels
+//! that can reach a point within margin of origin.
+std::size_t select_within_reach(const float* x, const float* y, const float* z, const float* sigma,
+                                const std::uint32_t* slots, std::size_t n, const float origin[3],
+                                float r2, float scale, float margin, std::uint32_t* out);
 
 }  // namespace scanclean::detail

@@ -3,6 +3,7 @@
 // the fast exp, and the transposed append against the one-by-one append.
 
 #include "../../filter/src/candidate_eval.h"
+#include "../../filter/src/select.h"
 
 #include <gtest/gtest.h>
 
@@ -171,39 +172,6 @@ TEST(CandidateEvalTest, StepAfterMinMahalanobisEqualsAFreshStepBitForBit) {
   EXPECT_GT(kept_trials, 5);  // the comparison was made, not skipped
 }
 
-TEST(CandidateEvalTest, SelectWithinEqualsTheScalarDistanceTest) {
-  // Points around a sphere of radius r (many within a few ulps of it), padded with +inf.
-  std::mt19937 rng(21);
-  std::normal_distribution<float> g(0.0f, 1.0f);
-  std::uniform_real_distribution<float> u(0.999f, 1.001f);
-  const float origin[3] = {0.31f, -0.12f, 0.05f};
-  const float r = 0.0125f, r2 = r * r;
-  std::vector<float> x, y, z;
-  std::vector<std::uint32_t> slots;
-  for (int j = 0; j < 203; ++j) {
-    Eigen::Vector3f v(g(rng), g(rng), g(rng));
-    v *= r * u(rng) / v.norm();
-    x.push_back(origin[0] + v.x());
-    y.push_back(origin[1] + v.y());
-    z.push_back(origin[2] + v.z());
-    slots.push_back(static_cast<std::uint32_t>(1000 + 3 * j));
-  }
-  std::vector<std::uint32_t> expected;
-  for (std::size_t j = 0; j < x.size(); ++j) {
-    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
-    const float d2 = dx * dx + dy * dy;
-    if (d2 + dz * dz < r2) expected.push_back(slots[j]);
-  }
-  pad_at_infinity(x, y, z, slots, 7);
-  std::vector<std::uint32_t> out(x.size());
-  const std::size_t n =
-      select_within(x.data(), y.data(), z.data(), slots.data(), x.size(), origin, r2, out.data());
-  out.resize(n);
-  EXPECT_EQ(out, expected);
-  EXPECT_GT(expected.size(), 50u);  // both sides of the sphere are present
-  EXPECT_LT(expected.size(), 150u);
-}
-
 TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
   // The oracle: the step sums over every kernel. Dropping the kernels farther from the gather
   // origin than 3.03 sigma_j + margin (select_within_reach, as the projection's regathers do)
@@ -259,33 +227,6 @@ TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
     }
   }
   EXPECT_GT(dropped, total / 3);  // the filter does drop kernels here
-}
-
-TEST(CandidateEvalTest, SelectWithinReachEqualsTheScalarTests) {
-  // Both tests, in float without fused multiply-add, against a plain loop; padding at infinity.
-  std::mt19937 rng(33);  // seed 33
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f), s(0.0f, 0.5f);
-  const float origin[3] = {0.1f, 0.2f, -0.1f}, r2 = 0.5f, scale = 3.03f, margin = 0.05f;
-  std::vector<float> x, y, z, sigma;
-  std::vector<std::uint32_t> slots, expected;
-  for (std::uint32_t j = 0; j < 301; ++j) {
-    x.push_back(origin[0] + u(rng));
-    y.push_back(origin[1] + u(rng));
-    z.push_back(origin[2] + 0.3f * u(rng));
-    sigma.push_back(s(rng));
-    slots.push_back(7 * j + 1);
-    const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
-    const float d2 = dx * dx + dy * dy;
-    const float reach = scale * sigma[j] + margin;
-    if (d2 + dz * dz < r2 && d2 + dz * dz < reach * reach) expected.push_back(slots[j]);
-  }
-  pad_at_infinity(x, y, z, slots, 3, &sigma, 1);
-  std::vector<std::uint32_t> out(x.size());
-  out.resize(select_within_reach(x.data(), y.data(), z.data(), sigma.data(), slots.data(), x.size(),
-                                 origin, r2, scale, margin, out.data()));
-  EXPECT_EQ(out, expected);
-  EXPECT_GT(expected.size(), 20u);
-  EXPECT_LT(expected.size(), 250u);
 }
 
 TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {

@@ -1,10 +1,13 @@
 // kth_smallest_below (filter/src/select.h) against std::nth_element, the oracle: random values,
-// ties, values outside the stated range; the band, within and near-box counts against plain
-// loops; the float bound of a double test against the test itself.
+// ties, values outside the stated range; the band, within and near-box counts and the
+// selections by distance against plain loops, on every vector target (simd_targets.h); the
+// float bound of a double test against the test itself.
 
 #include "../../filter/src/select.h"
 
 #include <gtest/gtest.h>
+
+#include <Eigen/Core>
 
 #include <algorithm>
 #include <cmath>
@@ -14,8 +17,25 @@
 #include <random>
 #include <vector>
 
+#include "simd_targets.h"
+
 namespace scanclean::detail {
 namespace {
+
+// Pads the points with +inf coordinates (never selected) to a multiple of 8, as the selections
+// ask; slots (and sigma, when given) get `slot` (and `s`) there.
+void pad_at_infinity(std::vector<float>& x, std::vector<float>& y, std::vector<float>& z,
+                     std::vector<std::uint32_t>& slots, std::uint32_t slot,
+                     std::vector<float>* sigma = nullptr, float s = 0) {
+  const float inf = std::numeric_limits<float>::infinity();
+  while (x.size() % 8 != 0) {
+    x.push_back(inf);
+    y.push_back(inf);
+    z.push_back(inf);
+    slots.push_back(slot);
+    if (sigma) sigma->push_back(s);
+  }
+}
 
 // Oracle: std::nth_element on a copy.
 float nth(std::vector<float> v, std::size_t k) {
@@ -62,20 +82,22 @@ TEST(SelectTest, ExactWithTiesAndValuesOutsideTheRange) {
 // count_below_and_band against a plain loop over the same float arithmetic: random points
 // around q, counts of every length (the vector body and its scalar tail), bounds on values.
 TEST(SelectTest, SmallSelectionByCountingMatchesNthElement) {
-  // Every size up to kSmallSelect (whole vectors and tails), every rank, with ties.
-  std::mt19937 rng(71);  // seed 71
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  for (std::size_t n = 1; n <= kSmallSelect; ++n) {
-    std::vector<float> v(n);
-    for (auto& x : v) x = u(rng);
-    for (std::size_t i = 0; i + 2 < n; i += 5) v[i + 2] = v[i];
-    for (std::size_t k = 0; k < n; ++k) {
-      std::vector<float> scratch = v;
-      EXPECT_EQ(kth_smallest_small(scratch.data(), n, k), nth(v, k)) << "n " << n << " k " << k;
+  test::for_each_simd_target([&] {
+    // Every size up to kSmallSelect (whole vectors and tails), every rank, with ties.
+    std::mt19937 rng(71);  // seed 71
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (std::size_t n = 1; n <= kSmallSelect; ++n) {
+      std::vector<float> v(n);
+      for (auto& x : v) x = u(rng);
+      for (std::size_t i = 0; i + 2 < n; i += 5) v[i + 2] = v[i];
+      for (std::size_t k = 0; k < n; ++k) {
+        std::vector<float> scratch = v;
+        EXPECT_EQ(kth_smallest_small(scratch.data(), n, k), nth(v, k)) << "n " << n << " k " << k;
+      }
     }
-  }
-  std::vector<float> equal(40, 0.5f);
-  EXPECT_EQ(kth_smallest_small(equal.data(), equal.size(), 17), 0.5f);
+    std::vector<float> equal(40, 0.5f);
+    EXPECT_EQ(kth_smallest_small(equal.data(), equal.size(), 17), 0.5f);
+  });
 }
 
 TEST(SelectTest, BetweenMatchesNthElementOnSignedValues) {
@@ -108,138 +130,220 @@ TEST(SelectTest, BetweenMatchesNthElementOnSignedValues) {
 }
 
 TEST(SelectTest, BandCountsMatchAPlainLoopAndBracketTheKthDistance) {
-  std::mt19937 rng(63);  // seed 63
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  for (int trial = 0; trial < 200; ++trial) {
-    const std::size_t n =
-        static_cast<std::size_t>(trial % 41) + static_cast<std::size_t>(rng() % 300);
-    std::vector<float> x(n), y(n), z(n);
-    for (std::size_t j = 0; j < n; ++j) {
-      x[j] = u(rng);
-      y[j] = u(rng);
-      z[j] = 0.1f * u(rng);
-    }
-    if (n > 3) x[1] = x[0], y[1] = y[0], z[1] = z[0];  // a tie
-    const float q[3] = {0.1f * u(rng), 0.1f * u(rng), 0.0f};
-    const float lo2 = 0.2f + 0.2f * (u(rng) + 1), up2 = lo2 + 0.3f * (u(rng) + 1);
-    std::vector<float> all(n);
-    std::size_t want_below = 0;
-    std::vector<float> want_band;
-    for (std::size_t j = 0; j < n; ++j) {
-      const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
-      all[j] = dx * dx + dy * dy + dz * dz;
-      if (all[j] < lo2)
-        ++want_below;
-      else if (all[j] < up2)
-        want_band.push_back(all[j]);
-    }
-    std::size_t below = 5, m = 3;  // both add to what is there
-    std::vector<float> band(m + n + 8, -1.0f);
-    count_below_and_band(x.data(), y.data(), z.data(), n, q, lo2, up2, below, band.data(), m);
-    ASSERT_EQ(below, 5 + want_below) << trial;
-    ASSERT_EQ(m, 3 + want_band.size()) << trial;
-    EXPECT_TRUE(std::equal(want_band.begin(), want_band.end(), band.begin() + 3)) << trial;
-    // A band that brackets rank k holds the k-th smallest of all.
-    const std::size_t k = want_below + want_band.size() / 2;
-    if (want_band.empty() || k >= n) continue;
-    std::vector<float> b(band.begin() + 3, band.begin() + static_cast<std::ptrdiff_t>(m));
-    EXPECT_EQ(nth(b, k - want_below), nth(all, k)) << trial;
-  }
-}
-
-TEST(SelectTest, CountWithinMatchesAPlainLoop) {
-  // The oracle: the scalar loop over every point, with the same rounding of the distances.
-  std::mt19937 rng(23);  // seed 23
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f), l(0.0f, 2.0f);
-  std::uniform_int_distribution<std::uint32_t> c(1, 40);
-  for (std::size_t n : {0, 5, 8, 61, 300}) {
-    std::vector<float> x(n), y(n), z(n), lik(n);
-    std::vector<std::uint32_t> cnt(n);
-    for (std::size_t j = 0; j < n; ++j) {
-      x[j] = u(rng);
-      y[j] = u(rng);
-      z[j] = u(rng);
-      lik[j] = l(rng);
-      cnt[j] = c(rng);
-    }
-    if (n > 3) lik[3] = 1.0f;  // a likelihood at the bound itself counts
-    const float q[3] = {0.1f, -0.2f, 0.05f}, r2 = 0.49f, lik_max = 1.0f;
-    std::uint64_t sum = 0;
-    std::size_t within = 0, below = 0;
-    for (std::size_t j = 0; j < n; ++j) {
-      const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
-      if (!(dx * dx + dy * dy + dz * dz < r2)) continue;
-      sum += cnt[j];
-      ++within;
-      below += lik[j] <= lik_max ? 1 : 0;
-    }
-    WithinCounts w;
-    count_within(x.data(), y.data(), z.data(), cnt.data(), lik.data(), n, q, r2, lik_max, w);
-    EXPECT_EQ(w.sum, sum) << n;
-    EXPECT_EQ(w.n, within) << n;
-    EXPECT_EQ(w.at_or_below, below) << n;
-    if (n >= 61) {
-      EXPECT_GT(within, 0u);
-    }
-    WithinCounts no_lik;  // without likelihoods: the same sum and number, none at or below
-    count_within(x.data(), y.data(), z.data(), cnt.data(), nullptr, n, q, r2, lik_max, no_lik);
-    EXPECT_EQ(no_lik.sum, sum);
-    EXPECT_EQ(no_lik.n, within);
-    EXPECT_EQ(no_lik.at_or_below, 0u);
-  }
-}
-
-TEST(SelectTest, NearBoxKeepsEveryPointWithinReachOfAQueryInTheBox) {
-  // The oracle: a plain loop over the points with the same float rounding of the gaps; and the
-  // invariant the adaptive scale relies on: a point whose squared distance (rounded as
-  // count_below_and_band rounds it) to a query inside the box is below r2 is always kept.
-  std::mt19937 rng(29);  // seed 29
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f), in(0.0f, 1.0f);
-  for (std::size_t n : {0, 3, 8, 13, 64, 301}) {
-    for (int trial = 0; trial < 20; ++trial) {
+  test::for_each_simd_target([&] {
+    std::mt19937 rng(63);  // seed 63
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (int trial = 0; trial < 200; ++trial) {
+      const std::size_t n =
+          static_cast<std::size_t>(trial % 41) + static_cast<std::size_t>(rng() % 300);
       std::vector<float> x(n), y(n), z(n);
       for (std::size_t j = 0; j < n; ++j) {
         x[j] = u(rng);
         y[j] = u(rng);
-        z[j] = u(rng);
+        z[j] = 0.1f * u(rng);
       }
-      const float lo[3] = {-0.2f, -0.1f, 0.0f}, hi[3] = {0.1f, 0.25f, 0.05f};
-      const float r2 = 0.3f * 0.3f;
-      std::vector<float> ox(2 + n + 8), oy(2 + n + 8), oz(2 + n + 8);
-      std::size_t m = 2;  // appends after what is there
-      select_near_box(x.data(), y.data(), z.data(), nullptr, nullptr, n, lo, hi, r2,
-                      {ox.data(), oy.data(), oz.data()}, m);
-      std::vector<float> wx, wy, wz;
+      if (n > 3) x[1] = x[0], y[1] = y[0], z[1] = z[0];  // a tie
+      const float q[3] = {0.1f * u(rng), 0.1f * u(rng), 0.0f};
+      const float lo2 = 0.2f + 0.2f * (u(rng) + 1), up2 = lo2 + 0.3f * (u(rng) + 1);
+      std::vector<float> all(n);
+      std::size_t want_below = 0;
+      std::vector<float> want_band;
       for (std::size_t j = 0; j < n; ++j) {
-        const float ex = std::max(std::max(lo[0] - x[j], x[j] - hi[0]), 0.0f);
-        const float ey = std::max(std::max(lo[1] - y[j], y[j] - hi[1]), 0.0f);
-        const float ez = std::max(std::max(lo[2] - z[j], z[j] - hi[2]), 0.0f);
-        if (ex * ex + ey * ey + ez * ez < r2) {
-          wx.push_back(x[j]);
-          wy.push_back(y[j]);
-          wz.push_back(z[j]);
+        const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
+        all[j] = dx * dx + dy * dy + dz * dz;
+        if (all[j] < lo2)
+          ++want_below;
+        else if (all[j] < up2)
+          want_band.push_back(all[j]);
+      }
+      std::size_t below = 5, m = 3;  // both add to what is there
+      std::vector<float> band(m + n + 8, -1.0f);
+      count_below_and_band(x.data(), y.data(), z.data(), n, q, lo2, up2, below, band.data(), m);
+      ASSERT_EQ(below, 5 + want_below) << trial;
+      ASSERT_EQ(m, 3 + want_band.size()) << trial;
+      EXPECT_TRUE(std::equal(want_band.begin(), want_band.end(), band.begin() + 3)) << trial;
+      // A band that brackets rank k holds the k-th smallest of all.
+      const std::size_t k = want_below + want_band.size() / 2;
+      if (want_band.empty() || k >= n) continue;
+      std::vector<float> b(band.begin() + 3, band.begin() + static_cast<std::ptrdiff_t>(m));
+      EXPECT_EQ(nth(b, k - want_below), nth(all, k)) << trial;
+    }
+  });
+}
+
+TEST(SelectTest, CountWithinMatchesAPlainLoop) {
+  test::for_each_simd_target([&] {
+    // The oracle: the scalar loop over every point, with the same rounding of the distances.
+    std::mt19937 rng(23);  // seed 23
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f), l(0.0f, 2.0f);
+    std::uniform_int_distribution<std::uint32_t> c(1, 40);
+    for (std::size_t n : {0, 5, 8, 61, 300}) {
+      std::vector<float> x(n), y(n), z(n), lik(n);
+      std::vector<std::uint32_t> cnt(n);
+      for (std::size_t j = 0; j < n; ++j) {
+        x[j] = u(rng);
+        y[j] = u(rng);
+        z[j] = u(rng);
+        lik[j] = l(rng);
+        cnt[j] = c(rng);
+      }
+      if (n > 3) lik[3] = 1.0f;  // a likelihood at the bound itself counts
+      const float q[3] = {0.1f, -0.2f, 0.05f}, r2 = 0.49f, lik_max = 1.0f;
+      std::uint64_t sum = 0;
+      std::size_t within = 0, below = 0;
+      for (std::size_t j = 0; j < n; ++j) {
+        const float dx = x[j] - q[0], dy = y[j] - q[1], dz = z[j] - q[2];
+        if (!(dx * dx + dy * dy + dz * dz < r2)) continue;
+        sum += cnt[j];
+        ++within;
+        below += lik[j] <= lik_max ? 1 : 0;
+      }
+      WithinCounts w;
+      count_within(x.data(), y.data(), z.data(), cnt.data(), lik.data(), n, q, r2, lik_max, w);
+      EXPECT_EQ(w.sum, sum) << n;
+      EXPECT_EQ(w.n, within) << n;
+      EXPECT_EQ(w.at_or_below, below) << n;
+      if (n >= 61) {
+        EXPECT_GT(within, 0u);
+      }
+      WithinCounts no_lik;  // without likelihoods: the same sum and number, none at or below
+      count_within(x.data(), y.data(), z.data(), cnt.data(), nullptr, n, q, r2, lik_max, no_lik);
+      EXPECT_EQ(no_lik.sum, sum);
+      EXPECT_EQ(no_lik.n, within);
+      EXPECT_EQ(no_lik.at_or_below, 0u);
+    }
+  });
+}
+
+TEST(SelectTest, NearBoxKeepsEveryPointWithinReachOfAQueryInTheBox) {
+  test::for_each_simd_target([&] {
+    // The oracle: a plain loop over the points with the same float rounding of the gaps; and the
+    // invariant the adaptive scale relies on: a point whose squared distance (rounded as
+    // count_below_and_band rounds it) to a query inside the box is below r2 is always kept.
+    std::mt19937 rng(29);  // seed 29
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f), in(0.0f, 1.0f);
+    for (std::size_t n : {0, 3, 8, 13, 64, 301}) {
+      for (int trial = 0; trial < 20; ++trial) {
+        std::vector<float> x(n), y(n), z(n);
+        for (std::size_t j = 0; j < n; ++j) {
+          x[j] = u(rng);
+          y[j] = u(rng);
+          z[j] = u(rng);
+        }
+        const float lo[3] = {-0.2f, -0.1f, 0.0f}, hi[3] = {0.1f, 0.25f, 0.05f};
+        const float r2 = 0.3f * 0.3f;
+        std::vector<float> ox(2 + n + 8), oy(2 + n + 8), oz(2 + n + 8);
+        std::size_t m = 2;  // appends after what is there
+        // With the slots and extra values carried along.
+        std::vector<std::uint32_t> sl(n), osl(2 + n + 8);
+        std::vector<float> extra(n), oex(2 + n + 8);
+        for (std::size_t j = 0; j < n; ++j) {
+          sl[j] = static_cast<std::uint32_t>(5 * j + 1);
+          extra[j] = 0.5f * static_cast<float>(j);
+        }
+        select_near_box(x.data(), y.data(), z.data(), sl.data(), extra.data(), n, lo, hi, r2,
+                        {ox.data(), oy.data(), oz.data(), osl.data(), oex.data()}, m);
+        std::vector<float> wx, wy, wz, wex;
+        std::vector<std::uint32_t> wsl;
+        for (std::size_t j = 0; j < n; ++j) {
+          const float ex = std::max(std::max(lo[0] - x[j], x[j] - hi[0]), 0.0f);
+          const float ey = std::max(std::max(lo[1] - y[j], y[j] - hi[1]), 0.0f);
+          const float ez = std::max(std::max(lo[2] - z[j], z[j] - hi[2]), 0.0f);
+          if (ex * ex + ey * ey + ez * ez < r2) {
+            wx.push_back(x[j]);
+            wy.push_back(y[j]);
+            wz.push_back(z[j]);
+            wsl.push_back(sl[j]);
+            wex.push_back(extra[j]);
+          }
+        }
+        ASSERT_EQ(m, 2 + wx.size()) << "n " << n;
+        for (std::size_t k = 0; k < wx.size(); ++k) {
+          ASSERT_EQ(ox[2 + k], wx[k]);
+          ASSERT_EQ(oy[2 + k], wy[k]);
+          ASSERT_EQ(oz[2 + k], wz[k]);
+          ASSERT_EQ(osl[2 + k], wsl[k]);
+          ASSERT_EQ(oex[2 + k], wex[k]);
+        }
+        // Queries inside the box: every point the band count would see below r2 is kept.
+        for (int qi = 0; qi < 8; ++qi) {
+          const float q[3] = {lo[0] + in(rng) * (hi[0] - lo[0]), lo[1] + in(rng) * (hi[1] - lo[1]),
+                              lo[2] + in(rng) * (hi[2] - lo[2])};
+          std::size_t below_all = 0, below_kept = 0, m_all = 0, m_kept = 0;
+          std::vector<float> band(n + m + 8);
+          count_below_and_band(x.data(), y.data(), z.data(), n, q, r2, r2, below_all, band.data(),
+                               m_all);
+          count_below_and_band(ox.data() + 2, oy.data() + 2, oz.data() + 2, m - 2, q, r2, r2,
+                               below_kept, band.data(), m_kept);
+          EXPECT_EQ(below_kept, below_all) << "n " << n << " query " << qi;
         }
       }
-      ASSERT_EQ(m, 2 + wx.size()) << "n " << n;
-      for (std::size_t k = 0; k < wx.size(); ++k) {
-        ASSERT_EQ(ox[2 + k], wx[k]);
-        ASSERT_EQ(oy[2 + k], wy[k]);
-        ASSERT_EQ(oz[2 + k], wz[k]);
-      }
-      // Queries inside the box: every point the band count would see below r2 is kept.
-      for (int qi = 0; qi < 8; ++qi) {
-        const float q[3] = {lo[0] + in(rng) * (hi[0] - lo[0]), lo[1] + in(rng) * (hi[1] - lo[1]),
-                            lo[2] + in(rng) * (hi[2] - lo[2])};
-        std::size_t below_all = 0, below_kept = 0, m_all = 0, m_kept = 0;
-        std::vector<float> band(n + m + 8);
-        count_below_and_band(x.data(), y.data(), z.data(), n, q, r2, r2, below_all, band.data(),
-                             m_all);
-        count_below_and_band(ox.data() + 2, oy.data() + 2, oz.data() + 2, m - 2, q, r2, r2,
-                             below_kept, band.data(), m_kept);
-        EXPECT_EQ(below_kept, below_all) << "n " << n << " query " << qi;
-      }
     }
-  }
+  });
+}
+
+TEST(SelectTest, SelectWithinEqualsTheScalarDistanceTest) {
+  test::for_each_simd_target([&] {
+    // Points around a sphere of radius r (many within a few ulps of it), padded with +inf.
+    std::mt19937 rng(21);
+    std::normal_distribution<float> g(0.0f, 1.0f);
+    std::uniform_real_distribution<float> u(0.999f, 1.001f);
+    const float origin[3] = {0.31f, -0.12f, 0.05f};
+    const float r = 0.0125f, r2 = r * r;
+    std::vector<float> x, y, z;
+    std::vector<std::uint32_t> slots;
+    for (int j = 0; j < 203; ++j) {
+      Eigen::Vector3f v(g(rng), g(rng), g(rng));
+      v *= r * u(rng) / v.norm();
+      x.push_back(origin[0] + v.x());
+      y.push_back(origin[1] + v.y());
+      z.push_back(origin[2] + v.z());
+      slots.push_back(static_cast<std::uint32_t>(1000 + 3 * j));
+    }
+    std::vector<std::uint32_t> expected;
+    for (std::size_t j = 0; j < x.size(); ++j) {
+      const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+      const float d2 = dx * dx + dy * dy;
+      if (d2 + dz * dz < r2) expected.push_back(slots[j]);
+    }
+    pad_at_infinity(x, y, z, slots, 7);
+    std::vector<std::uint32_t> out(x.size());
+    const std::size_t n =
+        select_within(x.data(), y.data(), z.data(), slots.data(), x.size(), origin, r2, out.data());
+    out.resize(n);
+    EXPECT_EQ(out, expected);
+    EXPECT_GT(expected.size(), 50u);  // both sides of the sphere are present
+    EXPECT_LT(expected.size(), 150u);
+  });
+}
+
+TEST(SelectTest, SelectWithinReachEqualsTheScalarTests) {
+  test::for_each_simd_target([&] {
+    // Both tests, in float without fused multiply-add, against a plain loop; padding at infinity.
+    std::mt19937 rng(33);  // seed 33
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f), s(0.0f, 0.5f);
+    const float origin[3] = {0.1f, 0.2f, -0.1f}, r2 = 0.5f, scale = 3.03f, margin = 0.05f;
+    std::vector<float> x, y, z, sigma;
+    std::vector<std::uint32_t> slots, expected;
+    for (std::uint32_t j = 0; j < 301; ++j) {
+      x.push_back(origin[0] + u(rng));
+      y.push_back(origin[1] + u(rng));
+      z.push_back(origin[2] + 0.3f * u(rng));
+      sigma.push_back(s(rng));
+      slots.push_back(7 * j + 1);
+      const float dx = x[j] - origin[0], dy = y[j] - origin[1], dz = z[j] - origin[2];
+      const float d2 = dx * dx + dy * dy;
+      const float reach = scale * sigma[j] + margin;
+      if (d2 + dz * dz < r2 && d2 + dz * dz < reach * reach) expected.push_back(slots[j]);
+    }
+    pad_at_infinity(x, y, z, slots, 3, &sigma, 1);
+    std::vector<std::uint32_t> out(x.size());
+    out.resize(select_within_reach(x.data(), y.data(), z.data(), sigma.data(), slots.data(),
+                                   x.size(), origin, r2, scale, margin, out.data()));
+    EXPECT_EQ(out, expected);
+    EXPECT_GT(expected.size(), 20u);
+    EXPECT_LT(expected.size(), 250u);
+  });
 }
 
 TEST(SelectTest, LargestFloatBoundDecidesTheDoubleTestExactly) {
