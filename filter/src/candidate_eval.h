@@ -1,9 +1,10 @@
 #pragma once
 //! Internal: the projection's inner loops over a point's candidate kernels, in float SIMD
-//! (8-wide AVX2+FMA when the CPU has it, else 4-wide SSE2), with a fast exp. Candidates are held
-//! relative to a local origin (the point where they were gathered) so float keeps full
-//! resolution. Per-lane partial sums are combined in double in a fixed order, so results do not
-//! depend on threads (they may differ between the AVX2 and SSE2 paths).
+//! (Google Highway, dispatched at run time: 8 lanes on AVX2 and AVX-512, 4 on SSE4 and NEON),
+//! with a fast exp. Candidates are held relative to a local origin (the point where they were
+//! gathered) so float keeps full resolution. Per-lane partial sums are combined in double in a
+//! fixed order, so results do not depend on threads (they may differ between 8-lane and 4-lane
+//! targets, and with fused multiply-add or without).
 
 #include <cstddef>
 #include <cstdint>
@@ -83,8 +84,8 @@ struct StepSums {
   double likelihood() const;
 };
 
-//! Appends the kernels records[slots[k]], k < n, with centres relative to origin; AVX2
-//! transposes 8 records at a time.
+//! Appends the kernels records[slots[k]], k < n, with centres relative to origin; on x86 with
+//! AVX2, 8 records at a time by a transposition in registers.
 void append_records(CandidateBuffer& buffer, const KernelRecord* records,
                     const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2);
 
@@ -106,7 +107,5 @@ double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
 //! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error below 5e-7 on
 //! [-10, 0], where the loops use it; up to 4e-6 towards -80, from rounding a log2(e) in float).
 float fast_exp(float a);
-//! "avx2+fma" or "sse2": the path chosen at run time.
-const char* simd_path();
 
 }  // namespace scanclean::detail

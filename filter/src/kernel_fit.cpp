@@ -1,7 +1,5 @@
 #include "kernel_fit.h"
 
-#include <immintrin.h>
-
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -10,6 +8,17 @@
 // The 8-wide helpers below return vectors by value; they are always inlined into functions
 // compiled for AVX2 or into their SSE2 twins, so the ABI note GCC gives for them does not apply.
 #pragma GCC diagnostic ignored "-Wpsabi"
+
+// The loops are written with the compiler's vector types (GCC and Clang), whose lane counts are
+// the fit's own: the sums in 4 double lanes (docs/ALGORITHM.md section 6), the trimming in 8
+// floats. On x86 they are compiled twice, for AVX2 and for the baseline (SSE2), and chosen at
+// run time; elsewhere once, for the baseline (NEON on ARM). Highway's vectors take the lane
+// count of the target, which would change the sums' order from one processor to another.
+#if defined(__x86_64__)
+#define SCANCLEAN_AVX2 [[gnu::target("avx2")]]
+#else
+#define SCANCLEAN_AVX2
+#endif
 
 namespace scanclean::detail {
 namespace {
@@ -109,7 +118,7 @@ struct TrimPlaneF {
 // One trimming pass: eight residuals at a time; a block with none trimmed is kept whole (moved
 // down with vector stores once something before it was trimmed), the others sample by sample.
 // (Without AVX2 the scalar loop, trim_samples_scalar, is the same pass.)
-[[gnu::target("avx2")]] std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSums& fs) {
+SCANCLEAN_AVX2 std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSums& fs) {
   float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data(), *pt = q.t.data();
   const std::size_t n = q.n;
   const V8f nx = V8f{} + p.nx, ny = V8f{} + p.ny, nz = V8f{} + p.nz;
@@ -120,7 +129,12 @@ struct TrimPlaneF {
     const V8f x = load8(px + k), y = load8(py + k), z = load8(pz + k);
     const V8f r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
     const V8i out = r * r > lim;
-    unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(reinterpret_cast<__m256>(out)));
+#if defined(__x86_64__)
+    unsigned mask = static_cast<unsigned>(__builtin_ia32_movmskps256(reinterpret_cast<V8f>(out)));
+#else
+    unsigned mask = 0;
+    for (int l = 0; l < 8; ++l) mask |= out[l] != 0 ? 1u << l : 0u;
+#endif
     const std::size_t valid = std::min(kFitLanes, n - k);
     mask &= (1u << valid) - 1;  // the padding is never trimmed, nor kept
     if (mask == 0 && valid == kFitLanes) {
@@ -201,15 +215,15 @@ struct TrimPlaneF {
 }
 
 // AVX2 without FMA: products and sums stay separately rounded, as in the scalar loops.
-[[gnu::target("avx2")]] FitSums sums_avx2(const FitSampleSet& q) {
+SCANCLEAN_AVX2 FitSums sums_avx2(const FitSampleSet& q) {
   return sums_impl(q);
 }
 FitSums sums_sse2(const FitSampleSet& q) {
   return sums_impl(q);
 }
-[[gnu::target("avx2")]] std::size_t make_avx2(const Eigen::Vector3d* p, const std::uint32_t* js,
-                                              std::size_t m, const Eigen::Vector3d& c, double h2,
-                                              double inv_h2, FitSampleSet& out) {
+SCANCLEAN_AVX2 std::size_t make_avx2(const Eigen::Vector3d* p, const std::uint32_t* js,
+                                     std::size_t m, const Eigen::Vector3d& c, double h2,
+                                     double inv_h2, FitSampleSet& out) {
   return make_impl(p, js, m, c, h2, inv_h2, out);
 }
 std::size_t make_sse2(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
@@ -218,7 +232,11 @@ std::size_t make_sse2(const Eigen::Vector3d* p, const std::uint32_t* js, std::si
 }
 
 bool have_avx2() {
+#if defined(__x86_64__)
   static const bool yes = __builtin_cpu_supports("avx2");
+#else
+  static const bool yes = false;  // the baseline loops (trim_samples_scalar for the trimming)
+#endif
   return yes;
 }
 

@@ -170,6 +170,7 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
       std::vector<std::uint8_t> low_l(by_l ? R : 0, 0);
       const std::size_t anchors = by_d ? (R + kDisplacementAnchor - 1) / kDisplacementAnchor : 0;
       std::vector<MoveStats> anchor_stats(anchors);
+      const SelectLoops loops = select_loops();  // dispatched once, called per run
       parallel_each(R, [&](std::size_t s) {
         thread_local std::vector<float> around_d;
         const bool anchor = by_d && s % kDisplacementAnchor == 0;
@@ -188,8 +189,8 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
           WithinCounts w;
           aidx.for_each_adjacent_run(
               static_cast<std::size_t>(c), [&](std::uint32_t b, std::uint32_t e) {
-                count_within(ax.data() + b, ay.data() + b, az.data() + b, around_cnt + b,
-                             by_l ? around_lik + b : nullptr, e - b, qa, r * r, bound, w);
+                loops.count_within(ax.data() + b, ay.data() + b, az.data() + b, around_cnt + b,
+                                   by_l ? around_lik + b : nullptr, e - b, qa, r * r, bound, w);
               });
           rho[s] = static_cast<double>(w.sum) * static_cast<double>(stride);
           if (by_l) low_l[s] = w.n > 0 && w.at_or_below <= w.n / 4 ? 1 : 0;

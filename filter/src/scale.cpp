@@ -142,6 +142,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       const float rmax2 = sr.index->max_adjacent_radius() * sr.index->max_adjacent_radius();
       if (sr.index->cell_count() == 0)  // no grid (cannot happen with a cell > 0; kept safe)
         parallel_each(N, [&](std::size_t i) { hi[i] = static_cast<float>(kth(pf[i])); });
+      const detail::SelectLoops loops = detail::select_loops();  // dispatched once, called per run
       parallel_each_reporting(sr.index->cell_count(), o, "scale", [&](std::size_t c) {
         thread_local std::vector<float> bx, by, bz, hit, band, cx, cy, cz;
         thread_local std::vector<std::uint8_t> octant;
@@ -197,13 +198,13 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
               const float lo2 = lo * lo, up2 = up * up;
               std::size_t below = 0, m = 0;
               if (up <= within) {  // the compact points hold every point below up
-                detail::count_below_and_band(px, py, pz, np, qa, lo2, up2, below, band.data(), m);
+                loops.count_below_and_band(px, py, pz, np, qa, lo2, up2, below, band.data(), m);
               } else {
                 for (const Run& run : runs) {
                   if (!(gap2(run) < up2)) continue;
-                  detail::count_below_and_band(bx.data() + run.b, by.data() + run.b,
-                                               bz.data() + run.b, run.e - run.b, qa, lo2, up2,
-                                               below, band.data(), m);
+                  loops.count_below_and_band(bx.data() + run.b, by.data() + run.b,
+                                             bz.data() + run.b, run.e - run.b, qa, lo2, up2, below,
+                                             band.data(), m);
                 }
               }
               if (below < kk && kk - 1 < below + m) {
@@ -237,8 +238,8 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
             std::size_t n = 0, below = 0;
             for (const Run& run : runs) {
               if (!(gap2(run) < r2)) continue;
-              detail::count_below_and_band(bx.data() + run.b, by.data() + run.b, bz.data() + run.b,
-                                           run.e - run.b, qa, 0.0f, r2, below, hit.data(), n);
+              loops.count_below_and_band(bx.data() + run.b, by.data() + run.b, bz.data() + run.b,
+                                         run.e - run.b, qa, 0.0f, r2, below, hit.data(), n);
             }
             return n;
           };
@@ -293,9 +294,9 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
           for (const Run& run : runs) {
             const float g2 = (run.lo - ghi).cwiseMax(glo - run.hi).cwiseMax(0.0f).squaredNorm();
             if (g2 < w2)
-              detail::select_near_box(bx.data() + run.b, by.data() + run.b, bz.data() + run.b,
-                                      nullptr, nullptr, run.e - run.b, glo3, ghi3, w2,
-                                      {cx.data(), cy.data(), cz.data()}, nc);
+              loops.select_near_box(bx.data() + run.b, by.data() + run.b, bz.data() + run.b,
+                                    nullptr, nullptr, run.e - run.b, glo3, ghi3, w2,
+                                    {cx.data(), cy.data(), cz.data()}, nc);
           }
           for (std::uint32_t s = cb + 1; s < ce; ++s)
             if (octant[s - cb] == g) kth_at(s, guess, cx.data(), cy.data(), cz.data(), nc, within);

@@ -223,6 +223,14 @@ const char* Target() {
   return hwy::TargetName(HWY_TARGET);
 }
 
+SelectLoops Loops() {
+  SelectLoops l;
+  l.band = &Band;
+  l.within = &Within;
+  l.near_box = &NearBox;
+  return l;
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace scanclean::detail
 HWY_AFTER_NAMESPACE();
@@ -236,6 +244,11 @@ HWY_EXPORT(Within);
 HWY_EXPORT(NearBox);
 HWY_EXPORT(Within8);
 HWY_EXPORT(Reach8);
+HWY_EXPORT(Loops);
+
+SelectLoops select_loops() {
+  return HWY_DYNAMIC_DISPATCH(Loops)();
+}
 
 float kth_smallest_small(float* v, std::size_t n, std::size_t k) {
   float out = 0;

@@ -13,6 +13,8 @@
 #include <limits>
 #include <random>
 
+#include "simd_targets.h"
+
 namespace scanclean::detail {
 namespace {
 
@@ -91,142 +93,148 @@ Reference reference(const std::vector<KernelRecord>& k, const Eigen::Vector3d& x
 }
 
 TEST(CandidateEvalTest, VectorisedLoopsMatchTheScalarReference) {
-  const float t2 = 9, slab2 = 1;
-  for (int trial = 0; trial < 20; ++trial) {
-    const int n = 1 + trial * 7;  // 1 to 134 candidates: every padding remainder
-    const std::vector<KernelRecord> k = random_kernels(n, 100 + trial);
-    std::vector<std::uint32_t> slots(n);
-    for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
-    const float origin[3] = {0.001f, -0.002f, 0.0005f};
-    CandidateBuffer buf;
-    buf.clear();
-    append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
-    buf.finish();
-    ASSERT_EQ(buf.count, static_cast<std::size_t>(n));
-    const Eigen::Vector3d x(0.0012, -0.0009, 0.0003);  // absolute; relative to origin below
-    const float xf[3] = {static_cast<float>(x.x() - origin[0]),
-                         static_cast<float>(x.y() - origin[1]),
-                         static_cast<float>(x.z() - origin[2])};
-    const Eigen::Vector3d nref(0, 0, 1);
-    const float nref_f[3] = {0, 0, 1};
-    const Reference r = reference(k, x, nref, t2, slab2);
+  test::for_each_simd_target([&] {
+    const float t2 = 9, slab2 = 1;
+    for (int trial = 0; trial < 20; ++trial) {
+      const int n = 1 + trial * 7;  // 1 to 134 candidates: every padding remainder
+      const std::vector<KernelRecord> k = random_kernels(n, 100 + trial);
+      std::vector<std::uint32_t> slots(n);
+      for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
+      const float origin[3] = {0.001f, -0.002f, 0.0005f};
+      CandidateBuffer buf;
+      buf.clear();
+      append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
+      buf.finish();
+      ASSERT_EQ(buf.count, static_cast<std::size_t>(n));
+      const Eigen::Vector3d x(0.0012, -0.0009, 0.0003);  // absolute; relative to origin below
+      const float xf[3] = {static_cast<float>(x.x() - origin[0]),
+                           static_cast<float>(x.y() - origin[1]),
+                           static_cast<float>(x.z() - origin[2])};
+      const Eigen::Vector3d nref(0, 0, 1);
+      const float nref_f[3] = {0, 0, 1};
+      const Reference r = reference(k, x, nref, t2, slab2);
 
-    const float e_min_slab = min_mahalanobis(buf, xf);
-    double ref_min_slab = std::numeric_limits<double>::infinity();
-    for (int j = 0; j < n; ++j)
-      if (r.d[j] * r.d[j] < slab2 * k[j].h2()) ref_min_slab = std::min(ref_min_slab, r.e[j]);
-    if (std::isfinite(ref_min_slab)) {
-      EXPECT_NEAR(e_min_slab, ref_min_slab, 1e-4 * (1 + ref_min_slab)) << "trial " << trial;
-    }
-
-    StepSums s;
-    const bool kept = step_sums(buf, xf, nref_f, t2, s);
-    ASSERT_EQ(kept, std::isfinite(r.e_min)) << "trial " << trial;
-    if (kept) {
-      EXPECT_NEAR(s.e_min, r.e_min, 1e-4 * (1 + r.e_min));
-      EXPECT_NEAR(s.s, r.s, 1e-4 * r.s);
-      for (int a = 0; a < 3; ++a) {
-        EXPECT_NEAR(s.dn[a], r.dn[a], 1e-4 * r.s * 0.01) << "trial " << trial << " axis " << a;
-        EXPECT_NEAR(s.n[a], r.n[a], 1e-4 * r.s) << "trial " << trial << " axis " << a;
+      const float e_min_slab = min_mahalanobis(buf, xf);
+      double ref_min_slab = std::numeric_limits<double>::infinity();
+      for (int j = 0; j < n; ++j)
+        if (r.d[j] * r.d[j] < slab2 * k[j].h2()) ref_min_slab = std::min(ref_min_slab, r.e[j]);
+      if (std::isfinite(ref_min_slab)) {
+        EXPECT_NEAR(e_min_slab, ref_min_slab, 1e-4 * (1 + ref_min_slab)) << "trial " << trial;
       }
-      // The likelihood summed with the step (slab 1: the same kernels).
-      EXPECT_NEAR(s.likelihood(), r.likelihood, 1e-4 * r.likelihood + 1e-12) << "trial " << trial;
+
+      StepSums s;
+      const bool kept = step_sums(buf, xf, nref_f, t2, s);
+      ASSERT_EQ(kept, std::isfinite(r.e_min)) << "trial " << trial;
+      if (kept) {
+        EXPECT_NEAR(s.e_min, r.e_min, 1e-4 * (1 + r.e_min));
+        EXPECT_NEAR(s.s, r.s, 1e-4 * r.s);
+        for (int a = 0; a < 3; ++a) {
+          EXPECT_NEAR(s.dn[a], r.dn[a], 1e-4 * r.s * 0.01) << "trial " << trial << " axis " << a;
+          EXPECT_NEAR(s.n[a], r.n[a], 1e-4 * r.s) << "trial " << trial << " axis " << a;
+        }
+        // The likelihood summed with the step (slab 1: the same kernels).
+        EXPECT_NEAR(s.likelihood(), r.likelihood, 1e-4 * r.likelihood + 1e-12) << "trial " << trial;
+      }
+      EXPECT_NEAR(likelihood(buf, xf, t2), r.likelihood, 1e-4 * r.likelihood + 1e-12)
+          << "trial " << trial;
     }
-    EXPECT_NEAR(likelihood(buf, xf, t2), r.likelihood, 1e-4 * r.likelihood + 1e-12)
-        << "trial " << trial;
-  }
+  });
 }
 
 TEST(CandidateEvalTest, StepAfterMinMahalanobisEqualsAFreshStepBitForBit) {
-  const float t2 = 9, slab2 = 1;
-  int kept_trials = 0;
-  for (int trial = 0; trial < 20; ++trial) {
-    const int n = 1 + trial * 7;
-    const std::vector<KernelRecord> k = random_kernels(n, 300 + trial);
-    std::vector<std::uint32_t> slots(n);
-    for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
-    const float origin[3] = {0.002f, 0.001f, -0.0005f};
-    CandidateBuffer buf;
-    buf.clear();
-    append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
-    buf.finish();
-    // Points at and off the kernels, some beyond the truncation of every one.
-    const float xf[3] = {0.0004f * static_cast<float>(trial % 5), -0.0007f,
-                         0.002f * static_cast<float>(trial % 4)};
-    const float nref[3] = {0, 0.6f, 0.8f};
-    StepSums fresh, reused;
-    const bool kept_fresh = step_sums(buf, xf, nref, t2, fresh);
-    min_mahalanobis(buf, xf);
-    const bool kept_reused = step_sums_after_min_mahalanobis(buf, nref, t2, reused);
-    ASSERT_EQ(kept_fresh, kept_reused) << "trial " << trial;
-    if (!kept_fresh) continue;
-    ++kept_trials;
-    EXPECT_EQ(fresh.e_min, reused.e_min) << "trial " << trial;
-    EXPECT_EQ(fresh.s, reused.s) << "trial " << trial;
-    EXPECT_EQ(fresh.slab_sum, reused.slab_sum) << "trial " << trial;
-    for (int a = 0; a < 3; ++a) {
-      EXPECT_EQ(fresh.dn[a], reused.dn[a]) << "trial " << trial << " axis " << a;
-      EXPECT_EQ(fresh.n[a], reused.n[a]) << "trial " << trial << " axis " << a;
+  test::for_each_simd_target([&] {
+    const float t2 = 9, slab2 = 1;
+    int kept_trials = 0;
+    for (int trial = 0; trial < 20; ++trial) {
+      const int n = 1 + trial * 7;
+      const std::vector<KernelRecord> k = random_kernels(n, 300 + trial);
+      std::vector<std::uint32_t> slots(n);
+      for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
+      const float origin[3] = {0.002f, 0.001f, -0.0005f};
+      CandidateBuffer buf;
+      buf.clear();
+      append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
+      buf.finish();
+      // Points at and off the kernels, some beyond the truncation of every one.
+      const float xf[3] = {0.0004f * static_cast<float>(trial % 5), -0.0007f,
+                           0.002f * static_cast<float>(trial % 4)};
+      const float nref[3] = {0, 0.6f, 0.8f};
+      StepSums fresh, reused;
+      const bool kept_fresh = step_sums(buf, xf, nref, t2, fresh);
+      min_mahalanobis(buf, xf);
+      const bool kept_reused = step_sums_after_min_mahalanobis(buf, nref, t2, reused);
+      ASSERT_EQ(kept_fresh, kept_reused) << "trial " << trial;
+      if (!kept_fresh) continue;
+      ++kept_trials;
+      EXPECT_EQ(fresh.e_min, reused.e_min) << "trial " << trial;
+      EXPECT_EQ(fresh.s, reused.s) << "trial " << trial;
+      EXPECT_EQ(fresh.slab_sum, reused.slab_sum) << "trial " << trial;
+      for (int a = 0; a < 3; ++a) {
+        EXPECT_EQ(fresh.dn[a], reused.dn[a]) << "trial " << trial << " axis " << a;
+        EXPECT_EQ(fresh.n[a], reused.n[a]) << "trial " << trial << " axis " << a;
+      }
     }
-  }
-  EXPECT_GT(kept_trials, 5);  // the comparison was made, not skipped
+    EXPECT_GT(kept_trials, 5);  // the comparison was made, not skipped
+  });
 }
 
 TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
-  // The oracle: the step sums over every kernel. Dropping the kernels farther from the gather
-  // origin than 3.03 sigma_j + margin (select_within_reach, as the projection's regathers do)
-  // changes no sum beyond rounding, for points anywhere within the margin.
-  const float t2 = 9, slab2 = 1, scale = 3.03f, margin = 0.00125f;  // h / 8 at h = 1 cm
-  std::mt19937 rng(31);                                             // seed 31
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::size_t dropped = 0, total = 0;
-  for (int trial = 0; trial < 20; ++trial) {
-    const int n = 150;
-    std::vector<KernelRecord> k = random_kernels(n, 500 + trial);
-    for (KernelRecord& r : k)  // spread the centres (2.4 h) beyond most kernels' reach
-      for (std::size_t a = KernelRecord::kCx; a <= KernelRecord::kCz; ++a) r.f[a] *= 4;
-    const float origin[3] = {0.003f * u(rng), 0.003f * u(rng), 0.0005f * u(rng)};
-    std::vector<float> x(n), y(n), z(n), sigma(n);
-    std::vector<std::uint32_t> all(n), kept(n + 8);
-    for (int j = 0; j < n; ++j) {
-      x[j] = k[j].f[KernelRecord::kCx];
-      y[j] = k[j].f[KernelRecord::kCy];
-      z[j] = k[j].f[KernelRecord::kCz];
-      sigma[j] = k[j].sigma();
-      all[j] = static_cast<std::uint32_t>(j);
-    }
-    pad_at_infinity(x, y, z, all, 0, &sigma, 0);
-    const std::size_t m =
-        select_within_reach(x.data(), y.data(), z.data(), sigma.data(), all.data(), x.size(),
-                            origin, 1.0f, scale, margin, kept.data());
-    dropped += static_cast<std::size_t>(n) - m;
-    total += static_cast<std::size_t>(n);
-    CandidateBuffer every, reached;
-    every.clear();
-    reached.clear();
-    append_records(every, k.data(), all.data(), static_cast<std::size_t>(n), origin, slab2);
-    append_records(reached, k.data(), kept.data(), m, origin, slab2);
-    every.finish();
-    reached.finish();
-    const float nref[3] = {0, 0, 1};
-    for (int p = 0; p < 10; ++p) {
-      Eigen::Vector3f d(u(rng), u(rng), u(rng));
-      d *= 0.999f * margin / std::max(d.norm(), 1e-6f) * std::abs(u(rng));
-      const float xf[3] = {d.x(), d.y(), d.z()};
-      StepSums a, b;
-      const bool ka = step_sums(every, xf, nref, t2, a), kb = step_sums(reached, xf, nref, t2, b);
-      ASSERT_EQ(ka, kb) << "trial " << trial;
-      if (!ka) continue;
-      EXPECT_EQ(a.e_min, b.e_min);
-      EXPECT_NEAR(a.s, b.s, 1e-6 * a.s);
-      for (int ax = 0; ax < 3; ++ax) {
-        EXPECT_NEAR(a.dn[ax], b.dn[ax], 1e-6 * a.s * 0.01);
-        EXPECT_NEAR(a.n[ax], b.n[ax], 1e-6 * a.s);
+  test::for_each_simd_target([&] {
+    // The oracle: the step sums over every kernel. Dropping the kernels farther from the gather
+    // origin than 3.03 sigma_j + margin (select_within_reach, as the projection's regathers do)
+    // changes no sum beyond rounding, for points anywhere within the margin.
+    const float t2 = 9, slab2 = 1, scale = 3.03f, margin = 0.00125f;  // h / 8 at h = 1 cm
+    std::mt19937 rng(31);                                             // seed 31
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    std::size_t dropped = 0, total = 0;
+    for (int trial = 0; trial < 20; ++trial) {
+      const int n = 150;
+      std::vector<KernelRecord> k = random_kernels(n, 500 + trial);
+      for (KernelRecord& r : k)  // spread the centres (2.4 h) beyond most kernels' reach
+        for (std::size_t a = KernelRecord::kCx; a <= KernelRecord::kCz; ++a) r.f[a] *= 4;
+      const float origin[3] = {0.003f * u(rng), 0.003f * u(rng), 0.0005f * u(rng)};
+      std::vector<float> x(n), y(n), z(n), sigma(n);
+      std::vector<std::uint32_t> all(n), kept(n + 8);
+      for (int j = 0; j < n; ++j) {
+        x[j] = k[j].f[KernelRecord::kCx];
+        y[j] = k[j].f[KernelRecord::kCy];
+        z[j] = k[j].f[KernelRecord::kCz];
+        sigma[j] = k[j].sigma();
+        all[j] = static_cast<std::uint32_t>(j);
       }
-      EXPECT_NEAR(a.likelihood(), b.likelihood(), 1e-6 * a.likelihood() + 1e-15);
+      pad_at_infinity(x, y, z, all, 0, &sigma, 0);
+      const std::size_t m =
+          select_within_reach(x.data(), y.data(), z.data(), sigma.data(), all.data(), x.size(),
+                              origin, 1.0f, scale, margin, kept.data());
+      dropped += static_cast<std::size_t>(n) - m;
+      total += static_cast<std::size_t>(n);
+      CandidateBuffer every, reached;
+      every.clear();
+      reached.clear();
+      append_records(every, k.data(), all.data(), static_cast<std::size_t>(n), origin, slab2);
+      append_records(reached, k.data(), kept.data(), m, origin, slab2);
+      every.finish();
+      reached.finish();
+      const float nref[3] = {0, 0, 1};
+      for (int p = 0; p < 10; ++p) {
+        Eigen::Vector3f d(u(rng), u(rng), u(rng));
+        d *= 0.999f * margin / std::max(d.norm(), 1e-6f) * std::abs(u(rng));
+        const float xf[3] = {d.x(), d.y(), d.z()};
+        StepSums a, b;
+        const bool ka = step_sums(every, xf, nref, t2, a), kb = step_sums(reached, xf, nref, t2, b);
+        ASSERT_EQ(ka, kb) << "trial " << trial;
+        if (!ka) continue;
+        EXPECT_EQ(a.e_min, b.e_min);
+        EXPECT_NEAR(a.s, b.s, 1e-6 * a.s);
+        for (int ax = 0; ax < 3; ++ax) {
+          EXPECT_NEAR(a.dn[ax], b.dn[ax], 1e-6 * a.s * 0.01);
+          EXPECT_NEAR(a.n[ax], b.n[ax], 1e-6 * a.s);
+        }
+        EXPECT_NEAR(a.likelihood(), b.likelihood(), 1e-6 * a.likelihood() + 1e-15);
+      }
     }
-  }
-  EXPECT_GT(dropped, total / 3);  // the filter does drop kernels here
+    EXPECT_GT(dropped, total / 3);  // the filter does drop kernels here
+  });
 }
 
 TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {
@@ -250,18 +258,20 @@ TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {
 }
 
 TEST(CandidateEvalTest, FastExpIsAccurateOverItsRange) {
-  // The loops evaluate exp at -e_j / 2 > -4.5 (truncation at 3 sigma) and at differences of such
-  // values; the floor is -80. Past the polynomial's error, float rounding of a log2(e) grows with
-  // |a|.
-  double near = 0, far = 0;
-  for (int k = 0; k <= 8000; ++k) {
-    const float a = -80.0f * static_cast<float>(k) / 8000.0f;
-    const double rel = std::abs(fast_exp(a) - std::exp(static_cast<double>(a))) / std::exp(a);
-    (a >= -10.0f ? near : far) = std::max(a >= -10.0f ? near : far, rel);
-  }
-  std::printf("fast_exp: max relative error %.3g on [-10, 0], %.3g on [-80, -10)\n", near, far);
-  EXPECT_LT(near, 1e-6);
-  EXPECT_LT(far, 5e-6);
+  test::for_each_simd_target([&] {
+    // The loops evaluate exp at -e_j / 2 > -4.5 (truncation at 3 sigma) and at differences of such
+    // values; the floor is -80. Past the polynomial's error, float rounding of a log2(e) grows with
+    // |a|.
+    double near = 0, far = 0;
+    for (int k = 0; k <= 8000; ++k) {
+      const float a = -80.0f * static_cast<float>(k) / 8000.0f;
+      const double rel = std::abs(fast_exp(a) - std::exp(static_cast<double>(a))) / std::exp(a);
+      (a >= -10.0f ? near : far) = std::max(a >= -10.0f ? near : far, rel);
+    }
+    std::printf("fast_exp: max relative error %.3g on [-10, 0], %.3g on [-80, -10)\n", near, far);
+    EXPECT_LT(near, 1e-6);
+    EXPECT_LT(far, 5e-6);
+  });
 }
 
 }  // namespace

@@ -346,6 +346,53 @@ TEST(SelectTest, SelectWithinReachEqualsTheScalarTests) {
   });
 }
 
+TEST(SelectTest, LoopsTakenOnceGiveTheFreeFunctionsResults) {
+  // select_loops() hands out the same target's loops as the free functions dispatch to.
+  test::for_each_simd_target([&] {
+    const SelectLoops loops = select_loops();
+    std::mt19937 rng(37);  // seed 37
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    const std::size_t n = 45;
+    std::vector<float> x(n), y(n), z(n), lik(n);
+    std::vector<std::uint32_t> cnt(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      x[j] = u(rng);
+      y[j] = u(rng);
+      z[j] = u(rng);
+      lik[j] = u(rng);
+      cnt[j] = static_cast<std::uint32_t>(j % 7 + 1);
+    }
+    const float q[3] = {0.1f, 0.0f, -0.1f};
+    std::size_t below_a = 0, below_b = 0, m_a = 0, m_b = 0;
+    std::vector<float> band_a(n + 8), band_b(n + 8);
+    loops.count_below_and_band(x.data(), y.data(), z.data(), n, q, 0.3f, 0.9f, below_a,
+                               band_a.data(), m_a);
+    count_below_and_band(x.data(), y.data(), z.data(), n, q, 0.3f, 0.9f, below_b, band_b.data(),
+                         m_b);
+    EXPECT_EQ(below_a, below_b);
+    ASSERT_EQ(m_a, m_b);
+    EXPECT_GT(m_a, 0u);
+    EXPECT_TRUE(std::equal(band_a.begin(), band_a.begin() + static_cast<std::ptrdiff_t>(m_a),
+                           band_b.begin()));
+    WithinCounts wa, wb;
+    loops.count_within(x.data(), y.data(), z.data(), cnt.data(), lik.data(), n, q, 0.5f, 0.0f, wa);
+    count_within(x.data(), y.data(), z.data(), cnt.data(), lik.data(), n, q, 0.5f, 0.0f, wb);
+    EXPECT_EQ(wa.sum, wb.sum);
+    EXPECT_EQ(wa.n, wb.n);
+    EXPECT_EQ(wa.at_or_below, wb.at_or_below);
+    const float lo[3] = {-0.1f, -0.1f, -0.1f}, hi[3] = {0.1f, 0.1f, 0.1f};
+    std::vector<float> ax(n + 8), ay(n + 8), az(n + 8), bx(n + 8), by(n + 8), bz(n + 8);
+    std::size_t na = 0, nb = 0;
+    loops.select_near_box(x.data(), y.data(), z.data(), nullptr, nullptr, n, lo, hi, 0.25f,
+                          {ax.data(), ay.data(), az.data()}, na);
+    select_near_box(x.data(), y.data(), z.data(), nullptr, nullptr, n, lo, hi, 0.25f,
+                    {bx.data(), by.data(), bz.data()}, nb);
+    ASSERT_EQ(na, nb);
+    EXPECT_GT(na, 0u);
+    EXPECT_TRUE(std::equal(ax.begin(), ax.begin() + static_cast<std::ptrdiff_t>(na), bx.begin()));
+  });
+}
+
 TEST(SelectTest, LargestFloatBoundDecidesTheDoubleTestExactly) {
   // For every float v near the bound, ratio x v <= l in double holds exactly when v <= bound.
   std::mt19937 rng(29);  // seed 29
