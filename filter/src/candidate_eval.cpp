@@ -1,7 +1,6 @@
 #include "candidate_eval.h"
 
 #include <cmath>
-#include <cstring>
 #include <limits>
 
 #if defined(__x86_64__)
