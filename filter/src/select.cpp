@@ -31,26 +31,16 @@ using M = hn::Mask<D>;
 // The lanes [j, j + N) of p, of which those of `in` (the first n - j) are read; the others are
 // zero. x86's AVX2 and AVX-512 load the lanes of a mask alone; on the other targets a masked
 // load may read the whole vector (and fault past the array's end), so a tail is copied first.
-HWY_INLINE V load(D d, const float* p, bool whole, M in) {
-  if (whole) return hn::LoadU(d, p);
+template <class DV>
+HWY_INLINE hn::Vec<DV> load(DV dv, const hn::TFromD<DV>* p, bool whole, hn::Mask<DV> in) {
+  if (whole) return hn::LoadU(dv, p);
 #if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2
-  return hn::MaskedLoad(in, d, p);
+  return hn::MaskedLoad(in, dv, p);
 #else
-  HWY_ALIGN float tail[8] = {};
-  const std::size_t n = hn::CountTrue(d, in);
+  HWY_ALIGN hn::TFromD<DV> tail[8] = {};
+  const std::size_t n = hn::CountTrue(dv, in);
   for (std::size_t k = 0; k < n; ++k) tail[k] = p[k];
-  return hn::Load(d, tail);
-#endif
-}
-HWY_INLINE hn::Vec<DU> load(DU du, const std::uint32_t* p, bool whole, hn::Mask<DU> in) {
-  if (whole) return hn::LoadU(du, p);
-#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX2
-  return hn::MaskedLoad(in, du, p);
-#else
-  HWY_ALIGN std::uint32_t tail[8] = {};
-  const std::size_t n = hn::CountTrue(du, in);
-  for (std::size_t k = 0; k < n; ++k) tail[k] = p[k];
-  return hn::Load(du, tail);
+  return hn::Load(dv, tail);
 #endif
 }
 
@@ -133,9 +123,8 @@ void Within(const float* x, const float* y, const float* z, const std::uint32_t*
     const V d2 = squared_distance(load(d, x + j, whole, valid), load(d, y + j, whole, valid),
                                   load(d, z + j, whole, valid), qx, qy, qz);
     const M in = hn::And(hn::Lt(d2, rr), valid);
-    const auto inu = hn::RebindMask(du, in);
     const auto c = load(du, cnt + j, whole, hn::RebindMask(du, valid));
-    sum = hn::Add(sum, hn::IfThenElseZero(inu, c));
+    sum = hn::Add(sum, hn::IfThenElseZero(hn::RebindMask(du, in), c));
     within += hn::CountTrue(d, in);
     if (lik) below += hn::CountTrue(d, hn::And(in, hn::Le(load(d, lik + j, whole, valid), lm)));
   }
@@ -239,9 +228,6 @@ HWY_AFTER_NAMESPACE();
 namespace scanclean::detail {
 
 HWY_EXPORT(RankSelect);
-HWY_EXPORT(Band);
-HWY_EXPORT(Within);
-HWY_EXPORT(NearBox);
 HWY_EXPORT(Within8);
 HWY_EXPORT(Reach8);
 HWY_EXPORT(Loops);
@@ -301,13 +287,13 @@ float kth_smallest_below(float* v, std::size_t n, std::size_t k, float upper) {
 void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
                           const float q[3], float lo2, float hi2, std::size_t& below, float* band,
                           std::size_t& m) {
-  HWY_DYNAMIC_DISPATCH(Band)(x, y, z, n, q, lo2, hi2, &below, band, &m);
+  select_loops().count_below_and_band(x, y, z, n, q, lo2, hi2, below, band, m);
 }
 
 void select_near_box(const float* x, const float* y, const float* z, const std::uint32_t* slot,
                      const float* extra, std::size_t n, const float lo[3], const float hi[3],
                      float r2, NearBoxOut out, std::size_t& m) {
-  HWY_DYNAMIC_DISPATCH(NearBox)(x, y, z, slot, extra, n, lo, hi, r2, &out, &m);
+  select_loops().select_near_box(x, y, z, slot, extra, n, lo, hi, r2, out, m);
 }
 
 bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {
@@ -326,7 +312,7 @@ bool largest_float_scaled_at_or_below(double ratio, double l, float& bound) {
 void count_within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
                   const float* lik, std::size_t n, const float q[3], float r2, float lik_max,
                   WithinCounts& out) {
-  HWY_DYNAMIC_DISPATCH(Within)(x, y, z, cnt, lik, n, q, r2, lik_max, &out);
+  select_loops().count_within(x, y, z, cnt, lik, n, q, r2, lik_max, out);
 }
 
 std::size_t select_within(const float* x, const float* y, const float* z,

@@ -13,6 +13,7 @@
 #include <limits>
 #include <random>
 
+#include "padded_points.h"
 #include "simd_targets.h"
 
 namespace scanclean::detail {
@@ -37,21 +38,6 @@ std::vector<KernelRecord> random_kernels(int n, std::uint32_t seed) {
     k[j].set(c, s_inv, n, h * h, static_cast<float>(0.2 + u(rng)), std::sqrt(lambda.maxCoeff()));
   }
   return k;
-}
-
-// Pads the points with +inf coordinates (never selected) to a multiple of 8, as the selections
-// ask; slots (and sigma, when given) get `slot` (and `s`) there.
-void pad_at_infinity(std::vector<float>& x, std::vector<float>& y, std::vector<float>& z,
-                     std::vector<std::uint32_t>& slots, std::uint32_t slot,
-                     std::vector<float>* sigma = nullptr, float s = 0) {
-  const float inf = std::numeric_limits<float>::infinity();
-  while (x.size() % 8 != 0) {
-    x.push_back(inf);
-    y.push_back(inf);
-    z.push_back(inf);
-    slots.push_back(slot);
-    if (sigma) sigma->push_back(s);
-  }
 }
 
 struct Reference {
@@ -202,7 +188,7 @@ TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
         sigma[j] = k[j].sigma();
         all[j] = static_cast<std::uint32_t>(j);
       }
-      pad_at_infinity(x, y, z, all, 0, &sigma, 0);
+      test::pad_at_infinity(x, y, z, all, 0, &sigma, 0);
       const std::size_t m =
           select_within_reach(x.data(), y.data(), z.data(), sigma.data(), all.data(), x.size(),
                               origin, 1.0f, scale, margin, kept.data());

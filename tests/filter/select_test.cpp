@@ -17,25 +17,11 @@
 #include <random>
 #include <vector>
 
+#include "padded_points.h"
 #include "simd_targets.h"
 
 namespace scanclean::detail {
 namespace {
-
-// Pads the points with +inf coordinates (never selected) to a multiple of 8, as the selections
-// ask; slots (and sigma, when given) get `slot` (and `s`) there.
-void pad_at_infinity(std::vector<float>& x, std::vector<float>& y, std::vector<float>& z,
-                     std::vector<std::uint32_t>& slots, std::uint32_t slot,
-                     std::vector<float>* sigma = nullptr, float s = 0) {
-  const float inf = std::numeric_limits<float>::infinity();
-  while (x.size() % 8 != 0) {
-    x.push_back(inf);
-    y.push_back(inf);
-    z.push_back(inf);
-    slots.push_back(slot);
-    if (sigma) sigma->push_back(s);
-  }
-}
 
 // Oracle: std::nth_element on a copy.
 float nth(std::vector<float> v, std::size_t k) {
@@ -306,7 +292,7 @@ TEST(SelectTest, SelectWithinEqualsTheScalarDistanceTest) {
       const float d2 = dx * dx + dy * dy;
       if (d2 + dz * dz < r2) expected.push_back(slots[j]);
     }
-    pad_at_infinity(x, y, z, slots, 7);
+    test::pad_at_infinity(x, y, z, slots, 7);
     std::vector<std::uint32_t> out(x.size());
     const std::size_t n =
         select_within(x.data(), y.data(), z.data(), slots.data(), x.size(), origin, r2, out.data());
@@ -336,7 +322,7 @@ TEST(SelectTest, SelectWithinReachEqualsTheScalarTests) {
       const float reach = scale * sigma[j] + margin;
       if (d2 + dz * dz < r2 && d2 + dz * dz < reach * reach) expected.push_back(slots[j]);
     }
-    pad_at_infinity(x, y, z, slots, 3, &sigma, 1);
+    test::pad_at_infinity(x, y, z, slots, 3, &sigma, 1);
     std::vector<std::uint32_t> out(x.size());
     out.resize(select_within_reach(x.data(), y.data(), z.data(), sigma.data(), slots.data(),
                                    x.size(), origin, r2, scale, margin, out.data()));
