@@ -13,6 +13,27 @@
 // floating-point contraction (filter/CMakeLists.txt), so every target rounds a squared distance
 // as (dx dx + dy dy) + dz dz in float, as a plain loop does: the selections are the same on
 // every processor.
+#ifndef SCANCLEAN_FILTER_SELECT_COMPRESS_TABLE
+#define SCANCLEAN_FILTER_SELECT_COMPRESS_TABLE
+namespace scanclean::detail {
+// For each set of up to 8 lanes (a mask's bits), the positions of its lanes in order, then zeros:
+// the permutation that moves the kept lanes to the front.
+struct CompressTable {
+  std::uint8_t lanes[256][8];
+};
+constexpr CompressTable make_compress_table() {
+  CompressTable t{};
+  for (unsigned bits = 0; bits < 256; ++bits) {
+    unsigned k = 0;
+    for (unsigned lane = 0; lane < 8; ++lane)
+      if (bits >> lane & 1u) t.lanes[bits][k++] = static_cast<std::uint8_t>(lane);
+  }
+  return t;
+}
+alignas(64) inline constexpr CompressTable kCompressTable = make_compress_table();
+}  // namespace scanclean::detail
+#endif
+
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "select.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -45,13 +66,28 @@ HWY_INLINE hn::Vec<DV> load(DV dv, const hn::TFromD<DV>* p, bool whole, hn::Mask
 }
 
 // Stores the lanes of v selected by `keep` at p, in order, and returns their number; the whole
-// vector is stored (p needs room for N). Compress in a register, then a plain store: AVX-512's
-// compressing store to memory (hn::CompressStore there) is microcoded on AMD's Zen 4 and made
-// the scale phase of the 2.1M sphere four times slower.
+// vector is stored (p needs room for N). Two things Highway 1.0.3 does slowly are avoided:
+// - AVX-512 and SVE compress in a register, then store: AVX-512's compressing store to memory
+//   (hn::CompressStore there) is microcoded on AMD's Zen 4 and made the scale phase of the 2.1M
+//   sphere four times slower.
+// - The other targets permute by our own table: hn::Compress there copies a 1 KiB table onto the
+//   stack at every call (GCC 12), which made the whole 2.1M filter twice as slow on AVX2.
 template <class DV>
 HWY_INLINE std::size_t compress_store(hn::Vec<DV> v, hn::Mask<DV> keep, DV dv, hn::TFromD<DV>* p) {
+#if (HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3) || HWY_TARGET == HWY_SVE || HWY_TARGET == HWY_SVE2 || \
+    HWY_TARGET == HWY_SVE_256 || HWY_TARGET == HWY_SVE2_128
   hn::StoreU(hn::Compress(v, keep), dv, p);
   return hn::CountTrue(dv, keep);
+#else
+  static_assert(hn::MaxLanes(DV()) <= 8, "the table holds 8 lanes");
+  std::uint8_t bits[8] = {};
+  hn::StoreMaskBits(dv, keep, bits);
+  const hn::RebindToUnsigned<DV> du;
+  const hn::Rebind<std::uint8_t, DV> d8;
+  const auto order = hn::PromoteTo(du, hn::LoadU(d8, kCompressTable.lanes[bits[0]]));
+  hn::StoreU(hn::TableLookupLanes(v, hn::IndicesFromVec(dv, order)), dv, p);
+  return hwy::PopCount(bits[0]);
+#endif
 }
 
 // |p - q|^2 rounded as (dx dx + dy dy) + dz dz.
