@@ -7,6 +7,7 @@
 #include "file_bytes.h"
 #include "scanclean/core/errors.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "scanclean/io/range_grid_normals.h"
 
 namespace scanclean {
 
@@ -103,6 +104,22 @@ PointCloud read_and_merge_conf(const std::filesystem::path& conf, ReadReport* re
     for (auto& w : part_report.warnings) rep.warnings.push_back(std::move(w));
     rep.dropped_invalid += part_report.dropped_invalid;
     declared += part_report.declared_points;
+    if (options.scan_normals && !part.has_normals()) {
+      if (part.grid.empty()) {
+        rep.warnings.push_back(s.files[i].string() +
+                               ": no range grid, so its points get no normals from the scanner");
+      } else {
+        // Stanford's range scans look along -z of their own frame: their surfaces face +z.
+        RangeGridNormals gn = range_grid_normals(part, Eigen::Vector3d::UnitZ());
+        if (10 * gn.facing < 9 * gn.with_normal)
+          rep.warnings.push_back(
+              s.files[i].string() + ": only " + std::to_string(gn.facing) + " of the " +
+              std::to_string(gn.with_normal) +
+              " normals of its range grid face +z, the scanner's side: a range scan seen from "
+              "+z was expected, its normals' orientation may be wrong");
+        part.normals = std::move(gn.normals);
+      }
+    }
     transform(part, s.poses[i]);
     part.grid = OrganizedGrid{};
     append(merged, part);

@@ -48,8 +48,11 @@ TEST_F(StanfordConfTest, MergesScansAndHandlesMissingFilesByPolicy) {
   const PointCloud c = read_and_merge_conf(conf, &r, ConfOptions{true});
   ASSERT_EQ(c.size(), 2u);
   EXPECT_EQ(c.positions[1], Eigen::Vector3d(1, 0, 1));
-  ASSERT_EQ(r.warnings.size(), 1u);
-  EXPECT_NE(r.warnings[0].find("gone.xyz"), std::string::npos);
+  // An .xyz scan has no range grid: no normals from the scanner, and a warning that says so.
+  EXPECT_FALSE(c.has_normals());
+  ASSERT_EQ(r.warnings.size(), 2u);
+  EXPECT_NE(r.warnings[0].find("a.xyz: no range grid"), std::string::npos) << r.warnings[0];
+  EXPECT_NE(r.warnings[1].find("gone.xyz"), std::string::npos);
 }
 
 TEST_F(StanfordConfTest, MalformedConfLinesNameTheLine) {
@@ -86,6 +89,29 @@ TEST(StanfordBunnyConfTest, MergedScansLieOnTheReconstruction) {
   std::printf("merged bunny scans: %zu points, median distance to bun_zipper.ply %.4f mm\n",
               merged.size(), median * 1e3);
   EXPECT_LT(median, 0.2e-3);  // well under a millimetre (measured ~0.06 mm)
+
+  // The normals from the scans' range grids face the way bun_zipper.ply's triangles do (out of
+  // the bunny) at the closest point of the mesh (all of the sampled ones did).
+  ASSERT_TRUE(merged.has_normals());
+  const TriangleMesh mesh = read_triangle_mesh(root / "reconstruction/bun_zipper.ply");
+  std::size_t with = 0, agree = 0, sampled = 0;
+  for (std::size_t i = 0; i < merged.size(); i += 7, ++sampled) {
+    if (merged.normals[i].isZero()) continue;
+    ++with;
+    const auto& t = mesh.triangles[md.query(merged.positions[i]).triangle];
+    const Eigen::Vector3d& a = mesh.vertices[static_cast<std::size_t>(t[0])];
+    const Eigen::Vector3d face = (mesh.vertices[static_cast<std::size_t>(t[1])] - a)
+                                     .cross(mesh.vertices[static_cast<std::size_t>(t[2])] - a);
+    agree += merged.normals[i].cast<double>().dot(face) > 0 ? 1 : 0;
+  }
+  std::printf(
+      "merged bunny scans: %zu of %zu sampled points with a scan normal, %zu (%.2f %%) "
+      "facing as bun_zipper.ply\n",
+      with, sampled, agree, 100.0 * static_cast<double>(agree) / static_cast<double>(with));
+  EXPECT_GT(with, sampled * 8 / 10);  // 85 %: the others at holes, grid borders and depth jumps
+  EXPECT_GT(agree, with * 97 / 100);
+  for (const auto& w : r.warnings)
+    EXPECT_EQ(w.find("normals of its range grid"), std::string::npos);
 
   // The other conventions put scans centimetres away: the check above can fail.
   const ScanSession s = read_conf(root / "data/bun.conf");

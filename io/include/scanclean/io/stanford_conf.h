@@ -39,11 +39,19 @@ struct ConfOptions {
   //! line. true: it is skipped with a warning (the bundled bun.conf lists bun315.ply and
   //! top3.ply, which are not shipped).
   bool skip_missing = false;
+  //! true (default): every scan with a range grid gives its points normals from it
+  //! (range_grid_normals), turned towards the scanner, which looks along -z of the scan's frame
+  //! (in each of bun.conf's scans 99.6-99.9 % of the grid normals face +z, and Stanford's
+  //! bun_zipper.ply faces the same way there), then rotated into the common frame. Points at a
+  //! grid border or a depth jump, and scans without a grid, get zero normals (none); a scan
+  //! whose grid normals do not face +z by at least 90 % gets a warning.
+  bool scan_normals = true;
 };
 
-//! Reads every bmesh scan (read_point_cloud), brings it into the common frame and merges them
-//! into one unorganized cloud (per-scan grids are dropped). Warnings of every scan are collected
-//! in report. \throw InputError, IoError.
+//! Reads every bmesh scan (read_point_cloud), gives its points normals from its range grid
+//! (ConfOptions::scan_normals), brings it into the common frame and merges them into one
+//! unorganized cloud (per-scan grids are dropped). Warnings of every scan are collected in
+//! report. \throw InputError, IoError.
 PointCloud read_and_merge_conf(const std::filesystem::path& conf, ReadReport* report = nullptr,
                                const ConfOptions& options = {});
 
