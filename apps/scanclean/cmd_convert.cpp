@@ -97,7 +97,8 @@ const CommandRegistrar kRegistrar{{
           ->check(CLI::IsMember({"ascii", "binary", "binary_compressed"}))
           ->default_val("binary_compressed");
       cmd.add_option("--conf", o->conf,
-                     "Stanford .conf: read every bmesh scan, bring it into the common frame "
+                     "Stanford .conf: read every bmesh scan, give its points normals from its "
+                     "range grid (facing the scanner), bring it into the common frame "
                      "(R(q)^T p + t) and merge them into OUT");
       cmd.add_flag("--skip-missing", o->skip_missing,
                    "With --conf: merge the scans that exist and warn about missing files "

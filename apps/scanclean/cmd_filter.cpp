@@ -201,6 +201,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
     append(cloud, part);
     ++files;
   }
+  std::string scan_normals;  // the --conf session's normals, for the summary
   if (!c.conf.empty()) {
     ReadReport report;
     ConfOptions conf_options;
@@ -210,6 +211,13 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
       for (const auto& scan : read_conf(c.conf).files)
         if (std::filesystem::exists(scan)) note_report_input({"--conf scan", scan});
     print_warnings(c.conf, report);
+    if (part.has_normals()) {
+      std::size_t with = 0;
+      for (const auto& n : part.normals) with += n.isZero() ? 0 : 1;
+      scan_normals = "the scans' range grids, " + with_thousands(with) + " of " +
+                     with_thousands(part.size()) + " points" +
+                     (o.use_sensor_normals ? "" : " (not used: --no-sensor-normals)");
+    }
     append(cloud, part);
     ++files;
   }
@@ -266,7 +274,10 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
               ", small components " + with_thousands(s.small_components) + ")");
   if (!c.outliers.empty()) sum.add("outliers file", collapsed ? "not written" : c.outliers);
   sum.add("output file", collapsed ? "not written (collapsed result)" : c.output);
-  if (c.orient_normals > 0) sum.add("normals", orientation);
+  if (c.orient_normals > 0)
+    sum.add("normals", orientation);
+  else if (!scan_normals.empty())
+    sum.add("normals", scan_normals);
   sum.add("scale", std::string(scale_mode_name(o.scale)));
   sum.add("h", s.h * 1000.0, 3, "mm");
   if (o.scale == ScaleMode::kAdaptive || o.scale_regions > 0) {
@@ -331,7 +342,10 @@ const CommandRegistrar kRegistrar{{
       cmd.add_option("-o,--output", c->output, "Output point cloud (format by extension)");
       cmd.add_option("--conf", c->conf,
                      "Stanford .conf scan session: every scan transformed and merged (added to "
-                     "the inputs)");
+                     "the inputs); each scan's range grid gives its points normals facing the "
+                     "scanner, so kernels fit only neighbours facing their way and with a "
+                     "normal (scan borders, depth jumps and hole edges have none); "
+                     "--no-sensor-normals ignores them");
       cmd.add_flag("--skip-missing", c->skip_missing,
                    "With --conf: merge the scans that exist, warn about missing ones (default: "
                    "a missing scan is an error)");
