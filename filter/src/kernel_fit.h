@@ -125,7 +125,9 @@ inline Eigen::Vector3f kernel_normal(const KernelFit& fit, bool use_dir, bool or
 //! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
 //! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
 //! normal is the sensor normal (d.v_orients_only: the PCA normal turned to agree with it);
-//! otherwise it is the PCA normal. Returns false if fewer than
+//! otherwise it is the PCA normal, and with `oriented` in a cloud with sensor normals (a point
+//! that has none of its own) turned to the side the sum of its neighbours' sensor normals
+//! faces. Returns false if fewer than
 //! k_min neighbours remain. `untrimmed` (optional) receives the neighbours as gathered, before
 //! trimming (for the own-plane refit, plane_refit.h).
 template <class Visit>
@@ -149,9 +151,14 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
     make_samples(d.p.data(), js, m, pi, h2, inv_h2, set);
     m = 0;
   };
+  // A point without a sensor normal in a cloud that has them (a scan's border, a hole's edge):
+  // its PCA normal takes the side its neighbours' sensor normals face.
+  const bool orient_by_neighbours = oriented && !use_dir && !d.v.empty();
+  Eigen::Vector3f around = Eigen::Vector3f::Zero();
   visit([&](std::size_t j) {
     // With sensor normals, only the neighbours facing the same way.
     if (use_dir && !(d.v[j].dot(vi) > 0.5f)) return;
+    if (orient_by_neighbours) around += d.v[j];
     js[m++] = static_cast<std::uint32_t>(j);
     if (m == kBlock) flush();
   });
@@ -162,6 +169,7 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
   }
   if (!fit_samples(set, pi, h, k_min, eigen_floor, out)) return false;
   out.n = kernel_normal(out, use_dir, d.v_orients_only, vi);
+  if (orient_by_neighbours && out.n.dot(around) < 0) out.n = -out.n;
   return true;
 }
 
