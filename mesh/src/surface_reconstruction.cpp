@@ -148,7 +148,10 @@ MeshResult reconstruct_surface(const PointCloud& cloud, const MeshOptions& o) {
     for (const auto& n : cloud.normals) normals.push_back(n.normalized());
     if (o.orientation != NormalOrientation::kKeep) {
       r.normal_agreement = mesh_detail::normal_agreement(cloud.positions, normals, o.orient_k);
-      if (o.orientation == NormalOrientation::kMst || r.normal_agreement < 0.99) {
+      // A few wrong normals are enough for Poisson to grow handles (on the merged bunny scans
+      // 202 of 266,884 at 99.94 % agreement gave a surface of genus 39 instead of a sphere):
+      // anything short of full agreement is made consistent by the MST.
+      if (o.orientation == NormalOrientation::kMst || r.normal_agreement < 1.0) {
         r.normals_flipped = mesh_detail::mst_orient(cloud.positions, normals, o.orient_k);
         r.normals_reoriented = true;
       }

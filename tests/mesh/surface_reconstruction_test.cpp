@@ -133,6 +133,22 @@ TEST(SurfaceReconstructionTest, PoissonIsDeterministic) {
   EXPECT_EQ(a.mesh.triangles, b.mesh.triangles);
 }
 
+TEST(SurfaceReconstructionTest, PoissonRepairsAFewWrongNormals) {
+  // 5 of 3000 outward normals turned inward: 99.9 % of the pairs still agree, but the five are
+  // enough to matter, so `auto` runs the MST, which turns exactly those five back.
+  PointCloud sphere = test::noisy_sphere(3000, 1.0, 0.0, 17);
+  for (std::size_t i = 100; i < 3000; i += 600) sphere.normals[i] = -sphere.normals[i];
+  MeshOptions o;
+  o.method = MeshMethod::kPoisson;
+  const MeshResult r = reconstruct_surface(sphere, o);
+  EXPECT_GT(r.normal_agreement, 0.99);
+  EXPECT_LT(r.normal_agreement, 1.0);
+  EXPECT_TRUE(r.normals_reoriented);
+  EXPECT_EQ(r.normals_flipped, 5u);
+  EXPECT_TRUE(r.topology.closed());
+  EXPECT_EQ(r.topology.euler, 2);
+}
+
 TEST(SurfaceReconstructionTest, PoissonReorientsScrambledNormals) {
   PointCloud sphere = test::noisy_sphere(3000, 1.0, 0.0, 13);
   std::mt19937 rng(5);

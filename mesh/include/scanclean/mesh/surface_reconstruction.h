@@ -33,7 +33,7 @@ MeshMethod parse_mesh_method(const std::string& name);
 
 //! How the normals for Poisson are made consistent.
 enum class NormalOrientation {
-  kAuto,  //!< keep them if neighbours agree (>= 99 % of k-NN pairs), else orient by MST
+  kAuto,  //!< keep them if every k-NN pair agrees, else orient by MST
   kKeep,  //!< use the input normals as they are
   kMst,   //!< always re-orient by CGAL::mst_orient_normals (top point's normal points up, +z)
 };
