@@ -123,7 +123,12 @@ struct RouteCloud {
 
 std::vector<RouteCloud> make_routes(Context& ctx, const Dataset& ds) {
   std::vector<RouteCloud> routes;
-  routes.push_back({"raw input", ds.raw, 0});
+  // The raw route is meshed from positions alone (with estimated normals for Poisson), as jet's:
+  // a scan session's normals are partial (none at the scans' borders). The filter gets them, as
+  // `scanclean filter --conf` does.
+  PointCloud raw = ds.raw;
+  raw.normals.clear();
+  routes.push_back({"raw input", std::move(raw), 0});
   FilterSettings fs;
   fs.merge = true;  // the program's defaults
   fs.threads = ctx.threads;
@@ -250,8 +255,7 @@ void run_mesh_suite(Context& ctx) {
     ConfOptions conf_options;
     conf_options.skip_missing = true;
     ReadReport report;
-    ds.raw = read_and_merge_conf(ctx.bunny_conf, &report, conf_options);
-    ds.raw.normals.clear();
+    ds.raw = read_and_merge_conf(ctx.bunny_conf, &report, conf_options);  // with scan normals
     const TriangleMesh gt = read_triangle_mesh(ctx.bunny_mesh);
     auto md = std::make_shared<MeshDistance>(gt);
     ds.gt_distance = [md](const Eigen::Vector3d& p) { return md->distance(p); };
