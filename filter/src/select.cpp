@@ -70,8 +70,8 @@ HWY_INLINE hn::Vec<DV> load(DV dv, const hn::TFromD<DV>* p, bool whole, hn::Mask
 // - AVX-512 and SVE compress in a register, then store: AVX-512's compressing store to memory
 //   (hn::CompressStore there) is microcoded on AMD's Zen 4 and made the scale phase of the 2.1M
 //   sphere four times slower.
-// - The other targets permute by our own table: hn::Compress there copies a 1 KiB table onto the
-//   stack at every call (GCC 12), which made the whole 2.1M filter twice as slow on AVX2.
+// - The other targets permute by our own table: hn::Compress there copies its table (1 KiB on
+//   AVX2) onto the stack at every call (GCC 12), which made the 2.1M filter twice as slow on AVX2.
 template <class DV>
 HWY_INLINE std::size_t compress_store(hn::Vec<DV> v, hn::Mask<DV> keep, DV dv, hn::TFromD<DV>* p) {
 #if (HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3) || HWY_TARGET == HWY_SVE || HWY_TARGET == HWY_SVE2 || \
