@@ -25,11 +25,12 @@ struct RangeGridNormals {
   std::size_t facing = 0;                //!< of those, how many face `toward` (n . toward > 0)
 };
 
-//! Per point of `scan` (which must have a grid): the unit normal of the stencil's two central
-//! differences, all turned to the one side most of them face `toward` (the direction from the
-//! surface to the scanner, in the scan's frame). One sign for the whole grid, not one per point,
-//! so surfaces seen at grazing angles keep the orientation of their neighbours. Points at the
-//! grid's border, beside empty cells or across a depth jump get a zero normal.
+//! Per point of `scan`: the unit normal of the stencil's two central differences, all turned to
+//! the one side most of them face `toward` (the direction from the surface to the scanner, in the
+//! scan's frame). One sign for the whole grid, not one per point, so surfaces seen at grazing
+//! angles keep the orientation of their neighbours. Points at the grid's border, beside empty
+//! cells or across a depth jump get a zero normal, and so does every point of a cloud without a
+//! grid.
 RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3d& toward,
                                     const RangeGridNormalOptions& options = {});
 

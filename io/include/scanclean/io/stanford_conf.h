@@ -40,11 +40,12 @@ struct ConfOptions {
   //! top3.ply, which are not shipped).
   bool skip_missing = false;
   //! true (default): every scan with a range grid gives its points normals from it
-  //! (range_grid_normals), turned towards the scanner, which looks along -z of the scan's frame
-  //! (in each of bun.conf's scans 99.6-99.9 % of the grid normals face +z, and Stanford's
-  //! bun_zipper.ply faces the same way there), then rotated into the common frame. Points at a
-  //! grid border or a depth jump, and scans without a grid, get zero normals (none); a scan
-  //! whose grid normals do not face +z by at least 90 % gets a warning.
+  //! (range_grid_normals), turned towards the scanner, which sits on the +z side of the scan's
+  //! frame (in each of bun.conf's eight scans 99.6-99.97 % of the grid's triangles face +z, and
+  //! Stanford's bun_zipper.ply faces the same way there), then rotated into the common frame.
+  //! Points at a grid border, beside a hole or across a depth jump, and scans without a grid,
+  //! get zero normals (none); a scan whose grid normals do not face +z by at least 90 % gets a
+  //! warning.
   bool scan_normals = true;
 };
 
