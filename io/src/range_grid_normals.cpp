@@ -27,7 +27,7 @@ RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3
   std::nth_element(steps.begin(), mid, steps.end());
   const double reach = options.max_jump * s * *mid;
   const double reach2 = reach * reach;
-  std::vector<Eigen::Vector3d> raw(scan.size(), Eigen::Vector3d::Zero());
+  // The normals as the grid's handedness gives them, then all turned at once if most face away.
   std::size_t toward_count = 0, away_count = 0;
   for (int r = s; r + s < g.rows; ++r)
     for (int c = s; c + s < g.cols; ++c) {
@@ -44,18 +44,15 @@ RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3
       const Eigen::Vector3d n = (point(right) - point(left)).cross(point(down) - point(up));
       const double len = n.norm();
       if (!(len > 0)) continue;
-      raw[static_cast<std::size_t>(k)] = n / len;
+      out.normals[static_cast<std::size_t>(k)] = (n / len).cast<float>();
+      ++out.with_normal;
       const double facing = n.dot(toward);
       toward_count += facing > 0 ? 1 : 0;
       away_count += facing < 0 ? 1 : 0;
     }
-  const double sign = away_count > toward_count ? -1.0 : 1.0;
-  for (std::size_t i = 0; i < raw.size(); ++i) {
-    if (raw[i].isZero()) continue;
-    out.normals[i] = (sign * raw[i]).cast<float>();
-    ++out.with_normal;
-    out.facing += sign * raw[i].dot(toward) > 0 ? 1 : 0;
-  }
+  out.facing = std::max(toward_count, away_count);
+  if (away_count > toward_count)
+    for (Eigen::Vector3f& n : out.normals) n = -n;
   return out;
 }
 
