@@ -5,8 +5,12 @@
 
 namespace scanclean {
 
-RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3d& toward,
-                                    const RangeGridNormalOptions& options) {
+namespace {
+
+// The grid's normals, all turned to the side where most of them have facing(p, n) > 0.
+template <class Facing>
+RangeGridNormals grid_normals(const PointCloud& scan, const RangeGridNormalOptions& options,
+                              Facing facing_of) {
   RangeGridNormals out;
   out.normals.assign(scan.size(), Eigen::Vector3f::Zero());
   const OrganizedGrid& g = scan.grid;
@@ -46,7 +50,7 @@ RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3
       if (!(len > 0)) continue;
       out.normals[static_cast<std::size_t>(k)] = (n / len).cast<float>();
       ++out.with_normal;
-      const double facing = n.dot(toward);
+      const double facing = facing_of(p, n);
       toward_count += facing > 0 ? 1 : 0;
       away_count += facing < 0 ? 1 : 0;
     }
@@ -54,6 +58,23 @@ RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3
   if (away_count > toward_count)
     for (Eigen::Vector3f& n : out.normals) n = -n;
   return out;
+}
+
+}  // namespace
+
+RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3d& toward,
+                                    const RangeGridNormalOptions& options) {
+  return grid_normals(scan, options, [&](const Eigen::Vector3d&, const Eigen::Vector3d& n) {
+    return n.dot(toward);
+  });
+}
+
+RangeGridNormals range_grid_normals_from_viewpoint(const PointCloud& scan,
+                                                   const Eigen::Vector3d& viewpoint,
+                                                   const RangeGridNormalOptions& options) {
+  return grid_normals(scan, options, [&](const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+    return n.dot(viewpoint - p);
+  });
 }
 
 }  // namespace scanclean

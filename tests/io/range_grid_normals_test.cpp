@@ -50,6 +50,36 @@ TEST(RangeGridNormalsTest, SphereCapNormalsAreTheOutwardRadii) {
   }
 }
 
+TEST(RangeGridNormalsTest, TurnsTowardAViewpoint) {
+  // The cap of the unit sphere about the origin: seen from (0, 0, 3) its normals are the outward
+  // radii; from the centre, where every point of the cap looks at the viewpoint from the inside,
+  // the inward ones.
+  const PointCloud cap = sphere_cap(40, 40, 0.01, 1.0);
+  const RangeGridNormals outside = range_grid_normals_from_viewpoint(cap, Eigen::Vector3d(0, 0, 3));
+  const RangeGridNormals centre = range_grid_normals_from_viewpoint(cap, Eigen::Vector3d::Zero());
+  ASSERT_GT(outside.with_normal, cap.size() / 2);
+  EXPECT_EQ(outside.facing, outside.with_normal);
+  EXPECT_EQ(centre.facing, centre.with_normal);
+  for (std::size_t i = 0; i < cap.size(); ++i) {
+    if (outside.normals[i].isZero()) continue;
+    EXPECT_GT(outside.normals[i].cast<double>().dot(cap.positions[i]), 0.99) << i;
+    EXPECT_EQ(centre.normals[i], -outside.normals[i]) << i;
+  }
+  // From the side: part of the cap faces the viewpoint, part faces away. One sign for the
+  // whole grid, that of the majority; `facing` counts the normals that face it.
+  const Eigen::Vector3d side(6, 0, 2);
+  const RangeGridNormals s = range_grid_normals_from_viewpoint(cap, side);
+  std::size_t facing = 0;
+  for (std::size_t i = 0; i < cap.size(); ++i) {
+    if (s.normals[i].isZero()) continue;
+    EXPECT_EQ(s.normals[i], outside.normals[i]) << i;  // most face it outward
+    facing += s.normals[i].cast<double>().dot(side - cap.positions[i]) > 0 ? 1 : 0;
+  }
+  EXPECT_EQ(s.facing, facing);
+  EXPECT_LT(s.facing, s.with_normal);
+  EXPECT_GT(s.facing, s.with_normal / 2);
+}
+
 TEST(RangeGridNormalsTest, TurnsTowardTheGivenSide) {
   const PointCloud cap = sphere_cap(40, 40, 0.01, 1.0);
   const RangeGridNormals up = range_grid_normals(cap, Eigen::Vector3d::UnitZ());

@@ -22,7 +22,7 @@ struct RangeGridNormalOptions {
 struct RangeGridNormals {
   std::vector<Eigen::Vector3f> normals;  //!< per point: unit, or zero where there is none
   std::size_t with_normal = 0;           //!< points that got one
-  std::size_t facing = 0;                //!< of those, how many face `toward` (n . toward > 0)
+  std::size_t facing = 0;                //!< of those, how many face the scanner (n . toward > 0)
 };
 
 //! Per point of `scan`: the unit normal of the stencil's two central differences, all turned to
@@ -33,5 +33,13 @@ struct RangeGridNormals {
 //! grid.
 RangeGridNormals range_grid_normals(const PointCloud& scan, const Eigen::Vector3d& toward,
                                     const RangeGridNormalOptions& options = {});
+
+//! The same for a scan taken from a point: `viewpoint` is the scanner's position in the scan's
+//! frame (metres; the origin for a depth camera's organized cloud in its own frame, as PCL's
+//! sensor origin), and a normal n at p faces it when n . (viewpoint - p) > 0. Still one sign for
+//! the whole grid, the side most of the normals face.
+RangeGridNormals range_grid_normals_from_viewpoint(const PointCloud& scan,
+                                                   const Eigen::Vector3d& viewpoint,
+                                                   const RangeGridNormalOptions& options = {});
 
 }  // namespace scanclean
