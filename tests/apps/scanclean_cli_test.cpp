@@ -316,6 +316,82 @@ TEST(ScancleanCliTest, OrientNormalsGivesACloudWithoutNormalsConsistentOnes) {
   EXPECT_EQ(run_filter_in(dir, {"--orient-normals", "24", "--no-sensor-normals"}).exit_code, 2);
 }
 
+TEST(ScancleanCliTest, ViewpointGivesAnOrganizedCloudItsGridsNormalsFacingTheScanner) {
+  // A depth camera at the origin looking along +z at a sphere of radius 0.3 m centred 1 m away:
+  // an organized 120 x 120 range image of the sphere's near side, noisy along the rays (seed 35),
+  // without normals. With --viewpoint 0,0,0 the grid's normals face the camera, and so do the
+  // filter's output normals; without, the PCA normals take either sign.
+  const auto dir = test::make_temp_dir("cli");
+  const Eigen::Vector3d centre(0, 0, 1);
+  constexpr double kRadius = 0.3;
+  PointCloud cloud;
+  cloud.grid.rows = cloud.grid.cols = 120;
+  cloud.grid.index.assign(120 * 120, -1);
+  std::mt19937 rng(35);
+  std::normal_distribution<double> noise(0.0, 0.001);
+  for (int r = 0; r < 120; ++r)
+    for (int c = 0; c < 120; ++c) {
+      const Eigen::Vector3d ray =
+          Eigen::Vector3d((c - 60) * 0.003, (r - 60) * 0.003, 1).normalized();
+      const double b = ray.dot(centre), disc = b * b - (centre.squaredNorm() - kRadius * kRadius);
+      if (disc <= 0) continue;  // the ray misses the sphere: an empty cell
+      cloud.grid.index[static_cast<std::size_t>(r) * 120 + c] =
+          static_cast<std::int32_t>(cloud.size());
+      cloud.positions.push_back((b - std::sqrt(disc) + noise(rng)) * ray);
+    }
+  ASSERT_GT(cloud.size(), 5000u);
+  write_point_cloud(dir / "frame.pcd", cloud);
+  auto facing_share = [](const PointCloud& c) {
+    std::size_t facing = 0;
+    for (std::size_t i = 0; i < c.size(); ++i)
+      facing += c.normals[i].cast<double>().dot(-c.positions[i]) > 0 ? 1 : 0;
+    return static_cast<double>(facing) / static_cast<double>(std::max<std::size_t>(1, c.size()));
+  };
+  auto rms_radius = [&](const PointCloud& c) {
+    double s = 0;
+    for (const auto& p : c.positions) s += std::pow((p - centre).norm() - kRadius, 2);
+    return std::sqrt(s / static_cast<double>(std::max<std::size_t>(1, c.size())));
+  };
+  auto filter = [&](const std::string& in, const std::vector<std::string>& extra) {
+    std::vector<std::string> args = {"filter", (dir / in).string(), "-o",
+                                     (dir / "out.ply").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args, dir);
+  };
+  const ProgramRun plain = filter("frame.pcd", {});
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  const PointCloud p = read_point_cloud(dir / "out.ply");
+  const double plain_share = facing_share(p);
+  EXPECT_GT(std::min(plain_share, 1 - plain_share), 0.1) << plain_share;  // both signs occur
+  const ProgramRun seen = filter("frame.pcd", {"--viewpoint", "0,0,0"});
+  ASSERT_EQ(seen.exit_code, 0) << seen.err;
+  EXPECT_TRUE(contains(seen.out, "the range grid, facing the viewpoint (0, 0, 0) m")) << seen.out;
+  EXPECT_FALSE(contains(seen.err, "warning")) << seen.err;
+  const PointCloud v = read_point_cloud(dir / "out.ply");
+  ASSERT_TRUE(v.has_normals());
+  EXPECT_GT(facing_share(v), 0.999);
+  EXPECT_LT(rms_radius(v), 1.1 * rms_radius(p));
+  EXPECT_LT(rms_radius(v), 0.5 * 0.001);  // below the input's noise
+  // A viewpoint beside the sphere, which half the grid's normals face away from: warned.
+  const ProgramRun beside = filter("frame.pcd", {"--viewpoint", "1,0,0.7"});
+  EXPECT_EQ(beside.exit_code, 0) << beside.err;
+  EXPECT_TRUE(contains(beside.err, "face the viewpoint")) << beside.err;
+  // Unorganized, or a bad viewpoint, or with --orient-normals: exit 2 naming the reason, before
+  // anything is written.
+  cloud.grid = OrganizedGrid{};
+  write_point_cloud(dir / "loose.ply", cloud);
+  fs::remove(dir / "out.ply");
+  const ProgramRun loose = filter("loose.ply", {"--viewpoint", "0,0,0"});
+  EXPECT_EQ(loose.exit_code, 2);
+  EXPECT_TRUE(contains(loose.err, "loose.ply") && contains(loose.err, "unorganized")) << loose.err;
+  const ProgramRun two = filter("frame.pcd", {"--viewpoint", "0,0"});
+  EXPECT_EQ(two.exit_code, 2);
+  EXPECT_TRUE(contains(two.err, "--viewpoint")) << two.err;
+  EXPECT_EQ(filter("frame.pcd", {"--viewpoint", "0,0,nan"}).exit_code, 2);
+  EXPECT_EQ(filter("frame.pcd", {"--viewpoint", "0,0,0", "--no-sensor-normals"}).exit_code, 2);
+  EXPECT_FALSE(fs::exists(dir / "out.ply"));
+}
+
 TEST(ScancleanCliTest, UnwritableOutputExitsFourAndLeavesNoFile) {
   const auto dir = test::make_temp_dir("cli");
   write_point_cloud(dir / "in.ply", test::noisy_plane(300, 1.0, 0.001, 5));
