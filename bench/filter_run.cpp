@@ -22,6 +22,7 @@ std::string FilterSettings::describe() const {
   if (refit_spread >= 0) s << ", refit_spread=" << refit_spread;
   if (orient_k > 0) s << ", normals oriented over k=" << orient_k;
   if (scale_regions > 0) s << ", scale_regions=" << scale_regions;
+  if (normals_orient_only) s << ", normals_orient_only";
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
 }
@@ -50,6 +51,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   options.threads = settings.threads;
   if (settings.refit_spread >= 0) options.refit_spread = settings.refit_spread;
   if (!settings.adaptive) options.scale_regions = settings.scale_regions;
+  options.normals_orient_only = settings.normals_orient_only;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r;
   if (settings.orient_k > 0 && !input.has_normals()) {

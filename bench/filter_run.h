@@ -24,7 +24,8 @@ struct FilterSettings {
   //! first (as `scanclean filter --orient-normals`), used with FilterOptions::normals_orient_only;
   //! their time is part of seconds_wall.
   int orient_k = 0;
-  int scale_regions = 0;  //!< FilterOptions::scale_regions (0: one h for the cloud)
+  int scale_regions = 0;             //!< FilterOptions::scale_regions (0: one h for the cloud)
+  bool normals_orient_only = false;  //!< FilterOptions::normals_orient_only
   std::string describe() const;
 };
 
