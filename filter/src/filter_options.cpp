@@ -59,6 +59,7 @@ void validate(const FilterOptions& o) {
   if (o.scale_regions > 0 && (o.scale != ScaleMode::kAuto || !(o.scale_gamma > 0)))
     bad_option("scale_regions", to_str(o.scale_regions),
                "0 unless the scale is automatic with the scale test on (scale_gamma > 0)");
+  if (o.orient_k != 0) check_int("orient_k", o.orient_k, kMinOrientK, kMaxOrientK);
   check_int("kernel_stride", o.kernel_stride, 0, 64);
   check_real("slab", o.slab, 0, 10, true);
   check_real("eigen_floor", o.eigen_floor, 0, 1, true);

@@ -200,6 +200,8 @@ FilterResult merge_parts(std::vector<FilterResult> parts,
     t.seconds_projection += s.seconds_projection;
     t.seconds_clustering += s.seconds_clustering;
     t.seconds_outliers += s.seconds_outliers;
+    t.orientation_trees += s.orientation_trees;
+    t.seconds_orientation += s.seconds_orientation;
   }
   PointCloud cloud = std::move(parts.front().cloud), outliers = std::move(parts.front().outliers);
   for (std::size_t k = 1; k < parts.size(); ++k) {

@@ -17,6 +17,7 @@
 #include "kernel_sites.h"
 #include "kernels.h"
 #include "neighbor_index.h"
+#include "orientation.h"
 #include "outlier_tests.h"
 #include "outputs.h"
 #include "parallel.h"
@@ -212,6 +213,17 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   parallel_each(N, [&](std::size_t i) { pf[i] = (input.positions[i] - origin).cast<float>(); });
   detail::PointSet in = input_points(input, origin, use_v, use_w);
   in.v_orients_only = o.normals_orient_only;
+  if (o.orient_k > 0 && !use_v) {
+    // A cloud without normals in use gets oriented ones first (orientation.h); from here on the
+    // filter runs as on input normals that only orient.
+    const auto t_orient = Clock::now();
+    detail::OrientedPointNormals on = detail::orient_normals(pf, o.orient_k, o);
+    in.v = std::move(on.normals);
+    in.v_orients_only = true;
+    use_v = true;
+    st.orientation_trees = on.trees;
+    st.seconds_orientation = seconds_since(t_orient);
+  }
   detail::ScaleChoice scale = detail::choose_scale(in, pf, box.diagonal().norm(), use_v, o);
   const double h = scale.h;
   st.h = h;
@@ -233,7 +245,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   // Spatial sort: everything from here on is stored and processed in grid order.
   const std::vector<std::uint32_t> input_index = index->order();
   detail::PointSet d = reorder(in, input_index);
-  st.seconds_scale = seconds_since(t);
+  st.seconds_scale = seconds_since(t) - st.seconds_orientation;
 
   // 2. Kernels: a weighted PCA per point (or every stride-th), frozen.
   detail::KernelParams prm;

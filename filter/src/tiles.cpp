@@ -442,6 +442,10 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     throw OptionError(
         "--scale-regions: a scale per region needs the whole cloud in memory; it cannot run "
         "tiled (raise --memory-budget)");
+  if (o.orient_k > 0)
+    throw OptionError(
+        "orient_k: orienting normals needs the whole cloud in memory; it cannot run tiled "
+        "(raise --memory-budget)");
   const auto t_start = Clock::now();
   auto progress = [&](const std::string& phase, double f) {
     if (t.progress) t.progress(phase, f);

@@ -27,6 +27,9 @@ enum class UpdateMode {
   // send most points to the iteration cap.
 };
 
+//! FilterOptions::orient_k's range, and the neighbours per point of its spanning forest's graph.
+constexpr int kMinOrientK = 6, kMaxOrientK = 200, kOrientationGraphNeighbours = 12;
+
 //! Options of robust_filter(). Lengths in metres. Checked by validate().
 struct FilterOptions {
   ScaleMode scale = ScaleMode::kAuto;
@@ -131,10 +134,19 @@ struct FilterOptions {
   //! With use_sensor_normals: the input normals only orient. They still select a kernel's
   //! neighbours (those whose normals agree, dot > 0.5: the two sides of a thin part stay apart)
   //! and orient its normal, but the normal is the weighted PCA normal of those neighbours, not
-  //! the input normal. For estimated normals (`scanclean filter --orient-normals K`: PCA over
-  //! K neighbours, oriented by an MST over K / 2; noisier than the fit at h); false
-  //! (default) for sensor normals, which are measured per point.
+  //! the input normal. For estimated normals (noisier than the fit at h; orient_k below sets
+  //! it for the normals it estimates), and for a range grid's normals from central differences
+  //! (`scanclean filter --viewpoint`); false (default) for sensor normals, which are measured
+  //! per point.
   bool normals_orient_only = false;
+  //! For a cloud without normals (or with use_sensor_normals off): give every point a normal
+  //! first, the PCA normal of its orient_k nearest neighbours, oriented consistently along the
+  //! minimum spanning forest of the graph of its 12 nearest (Hoppe et al. 1992; the recipe of
+  //! CGAL's pca_estimate_normals and mst_orient_normals), and filter with them as with
+  //! normals_orient_only: kernels fit only neighbours facing their way, so the two sides of a
+  //! thin part stay apart where their normals face away from each other. 0 = off (default),
+  //! else [kMinOrientK, kMaxOrientK]; not in tiled runs (it orients over the whole cloud).
+  int orient_k = 0;
   bool use_confidences = true;  //!< input confidences are the kernel weights w_i
   int threads = 0;              //!< 0 = all cores, else [1, 1024]; output identical for any
   //! Optional progress report (phase name, fraction in [0, 1]); always called from the thread

@@ -97,6 +97,10 @@ struct FilterStats {
   std::size_t not_converged = 0;
   double seconds_scale = 0, seconds_kernels = 0, seconds_projection = 0, seconds_clustering = 0,
          seconds_outliers = 0, seconds_total = 0;
+  //! FilterOptions::orient_k: the trees of the neighbour graph the normals were oriented over,
+  //! and the seconds it took (part of seconds_total, in none of the phases above).
+  std::size_t orientation_trees = 0;
+  double seconds_orientation = 0;
   std::size_t peak_rss_bytes = 0;  //!< process peak resident memory after the run (Linux)
   int threads = 0;                 //!< worker threads used
 };
