@@ -1,6 +1,5 @@
 #include "scanclean/mesh_handoff.h"
 
-#include <chrono>
 #include <cstdio>
 #include <vector>
 
@@ -29,35 +28,6 @@ std::shared_ptr<MeshHandoff> add_mesh_option(CLI::App& cmd) {
       ->check(CLI::IsMember({"afront", "poisson"}))
       ->capture_default_str();
   return m;
-}
-
-void check_orient_normals(int k, const std::string& command) {
-  if (k == 0) return;
-#if defined(SCANCLEAN_HAVE_MESH)
-  if (k < kMinOrientingK || k > kMaxOrientingK)
-    throw OptionError("--orient-normals: expected 0 (off) or an integer in [" +
-                      std::to_string(kMinOrientingK) + ", " + std::to_string(kMaxOrientingK) +
-                      "], got " + std::to_string(k));
-#else
-  throw UnavailableError(command +
-                         ": --orient-normals needs the mesh module (CGAL), which this build lacks");
-#endif
-  (void)command;
-}
-
-OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k) {
-#if defined(SCANCLEAN_HAVE_MESH)
-  const auto t0 = std::chrono::steady_clock::now();
-  OrientedNormals out;
-  out.normals = estimate_orienting_normals(cloud, k);
-  out.mst_k = orienting_mst_k(k);
-  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  return out;
-#else
-  (void)cloud;
-  (void)k;
-  throw UnavailableError("normal estimation needs the mesh module (CGAL), which this build lacks");
-#endif
 }
 
 void check_mesh_output(const MeshHandoff& m, const std::string& command) {

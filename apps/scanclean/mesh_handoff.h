@@ -4,7 +4,6 @@
 //! progress, the summary lines. Builds without the mesh module too: then --mesh exits 5.
 
 #include <CLI/CLI.hpp>
-#include <Eigen/Core>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -25,20 +24,6 @@ struct MeshHandoff {
   std::string method = "afront";  //!< --mesh-method
   bool wanted() const { return !path.empty(); }
 };
-
-//! Before any work: `--orient-normals k` (0 = off) must be in the mesh module's range and the
-//! mesh module must be built. \throw OptionError, UnavailableError.
-void check_orient_normals(int k, const std::string& command);
-
-//! Normals estimated for a cloud without them (the mesh module's estimate_orienting_normals: CGAL
-//! PCA normals over k neighbours, oriented by CGAL's MST over mst_k), and the seconds it took.
-struct OrientedNormals {
-  std::vector<Eigen::Vector3f> normals;
-  int mst_k = 0;
-  double seconds = 0;
-};
-//! \throw UnavailableError without the mesh module; InputError for fewer than k + 1 points.
-OrientedNormals estimate_oriented_normals(const PointCloud& cloud, int k);
 
 //! Adds --mesh FILE and --mesh-method to `cmd`.
 std::shared_ptr<MeshHandoff> add_mesh_option(CLI::App& cmd);

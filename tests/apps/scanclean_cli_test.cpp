@@ -273,8 +273,8 @@ TEST(ScancleanCliTest, DisplacementOptionReachesTheFilter) {
 
 TEST(ScancleanCliTest, OrientNormalsGivesACloudWithoutNormalsConsistentOnes) {
   // A noisy sphere without normals: the filter's output normals are PCA normals of either sign;
-  // with --orient-normals they follow the estimated, MST-oriented normals, so (nearly) all face
-  // the same way, and the points are as close to the sphere as without.
+  // with --orient-normals they follow the estimated, consistently oriented normals, so (nearly) all
+  // face the same way, and the points are as close to the sphere as without.
   const auto dir = test::make_temp_dir("cli");
   constexpr double kRadius = 0.3;
   PointCloud cloud = test::noisy_sphere(6000, kRadius, 0.002, 34);  // seed 34
@@ -300,7 +300,8 @@ TEST(ScancleanCliTest, OrientNormalsGivesACloudWithoutNormalsConsistentOnes) {
   const ProgramRun oriented = run_filter_in(dir, {"--orient-normals", "24"});
   ASSERT_EQ(oriented.exit_code, 0) << oriented.err;
   EXPECT_TRUE(contains(oriented.out, "normals:") &&
-              contains(oriented.out, "estimated (PCA over 24 neighbours, MST over 12)"))
+              contains(oriented.out,
+                       "estimated (PCA over 24 neighbours) and oriented (spanning forest over 12)"))
       << oriented.out;
   const PointCloud o = read_point_cloud(dir / "out.ply");
   ASSERT_TRUE(o.has_normals());
