@@ -20,7 +20,8 @@ std::string FilterSettings::describe() const {
   if (adaptive) s << ", scale=adaptive k=" << k_adaptive;
   if (kernel_stride > 0) s << ", kernel_stride=" << kernel_stride;
   if (refit_spread >= 0) s << ", refit_spread=" << refit_spread;
-  if (orient_k > 0) s << ", normals oriented over k=" << orient_k;
+  if (orient_k > 0) s << ", orient_k=" << orient_k;
+  if (cgal_orient_k > 0) s << ", CGAL normals (PCA k=" << cgal_orient_k << ", MST)";
   if (scale_regions > 0) s << ", scale_regions=" << scale_regions;
   if (normals_orient_only) s << ", normals_orient_only";
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
@@ -52,16 +53,17 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   if (settings.refit_spread >= 0) options.refit_spread = settings.refit_spread;
   if (!settings.adaptive) options.scale_regions = settings.scale_regions;
   options.normals_orient_only = settings.normals_orient_only;
+  options.orient_k = settings.orient_k;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r;
-  if (settings.orient_k > 0 && !input.has_normals()) {
+  if (settings.cgal_orient_k > 0 && !input.has_normals()) {
 #ifdef SCANCLEAN_BENCH_HAVE_MESH_SUITE
     PointCloud oriented = input;
-    oriented.normals = estimate_orienting_normals(oriented, settings.orient_k);
+    oriented.normals = estimate_orienting_normals(oriented, settings.cgal_orient_k);
     options.normals_orient_only = true;
     r = robust_filter(oriented, options);
 #else
-    throw UnavailableError("--orient-normals needs the mesh module (CGAL) in this build");
+    throw UnavailableError("--orient-normals-cgal needs the mesh module (CGAL) in this build");
 #endif
   } else {
     r = robust_filter(input, options);

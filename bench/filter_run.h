@@ -20,10 +20,13 @@ struct FilterSettings {
   int kernel_stride = 0;     //!< FilterOptions::kernel_stride (0 = automatic)
   int threads = 0;           //!< FilterOptions::threads (0 = all cores)
   double refit_spread = -1;  //!< FilterOptions::refit_spread (< 0: the library's default)
-  //! > 0: a cloud without normals gets normals estimated and oriented over this many neighbours
-  //! first (as `scanclean filter --orient-normals`), used with FilterOptions::normals_orient_only;
-  //! their time is part of seconds_wall.
+  //! FilterOptions::orient_k (as `scanclean filter --orient-normals K`; 0 = off).
   int orient_k = 0;
+  //! > 0, for comparison: a cloud without normals gets them from CGAL first (PCA over this many
+  //! neighbours, mst_orient_normals over half as many), used with
+  //! FilterOptions::normals_orient_only (what `--orient-normals` did before the filter oriented
+  //! normals itself); their time is part of seconds_wall.
+  int cgal_orient_k = 0;
   int scale_regions = 0;             //!< FilterOptions::scale_regions (0: one h for the cloud)
   bool normals_orient_only = false;  //!< FilterOptions::normals_orient_only
   std::string describe() const;

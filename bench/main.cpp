@@ -121,19 +121,27 @@ int run(int argc, char** argv) {
   double refit_spread = -1;
   app.add_option("--refit-spread", refit_spread,
                  "quality and real suites: robust_filter's refit_spread (default: the library's)");
+  // 0 (off) or K in [6, 200], for both orientation options.
+  const CLI::Validator orient_range(
+      [](std::string& s) {
+        char* end = nullptr;
+        const long k = std::strtol(s.c_str(), &end, 10);
+        const bool ok = end != s.c_str() && *end == '\0' && (k == 0 || (k >= 6 && k <= 200));
+        return ok ? std::string() : "expected 0 (off) or an integer in [6, 200], got " + s;
+      },
+      "0 or K in [6, 200]");
   int orient_normals = 0;
   app.add_option("--orient-normals", orient_normals,
-                 "quality and real suites: estimate normals over K neighbours (CGAL PCA) and "
-                 "orient them (CGAL MST over K / 2) before robust_filter, as scanclean filter "
-                 "--orient-normals K; 0 (off) or K in [6, 200]")
-      ->check(CLI::Validator(
-          [](std::string& s) {
-            char* end = nullptr;
-            const long k = std::strtol(s.c_str(), &end, 10);
-            const bool ok = end != s.c_str() && *end == '\0' && (k == 0 || (k >= 6 && k <= 200));
-            return ok ? std::string() : "expected 0 (off) or an integer in [6, 200], got " + s;
-          },
-          "0 or K in [6, 200]"));
+                 "quality and real suites: robust_filter orients normals first (PCA over K "
+                 "neighbours, spanning forest over 12; FilterOptions::orient_k), as scanclean "
+                 "filter --orient-normals K; 0 (off) or K in [6, 200]")
+      ->check(orient_range);
+  int cgal_orient_normals = 0;
+  app.add_option("--orient-normals-cgal", cgal_orient_normals,
+                 "quality and real suites, for comparison: CGAL's normals first (PCA over K "
+                 "neighbours, MST over K / 2), given to robust_filter as normals that only "
+                 "orient; 0 (off) or K in [6, 200]")
+      ->check(orient_range);
   int scale_regions = 0;
   app.add_option("--scale-regions", scale_regions,
                  "quality and real suites: robust_filter's scale_regions (a scale per region, "
@@ -167,6 +175,7 @@ int run(int argc, char** argv) {
   ctx.shape_names = shape_names;
   ctx.refit_spread = refit_spread;
   ctx.orient_normals = orient_normals;
+  ctx.cgal_orient_normals = cgal_orient_normals;
   ctx.scale_regions = scale_regions;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;

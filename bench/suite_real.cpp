@@ -181,6 +181,7 @@ void run_real_suite(Context& ctx) {
   fs.threads = ctx.threads;
   fs.refit_spread = ctx.refit_spread;
   fs.orient_k = ctx.orient_normals;
+  fs.cgal_orient_k = ctx.cgal_orient_normals;
   fs.scale_regions = ctx.scale_regions;
   FilterRun run = run_robust_filter(merged, fs);
   const DistanceStats before = distance_stats(md, merged.positions);

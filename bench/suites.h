@@ -28,9 +28,10 @@ struct Context {
   std::vector<std::string> shape_names;
   //! quality and real suites: FilterOptions::refit_spread (< 0: the library's default)
   double refit_spread = -1;
-  //! quality and real suites: > 0 estimates and orients normals over this many neighbours
-  //! before robust_filter (FilterSettings::orient_k)
+  //! quality and real suites: FilterOptions::orient_k (FilterSettings::orient_k; 0: off)
   int orient_normals = 0;
+  //! quality and real suites: CGAL's normals first (FilterSettings::cgal_orient_k; 0: off)
+  int cgal_orient_normals = 0;
   //! quality and real suites: FilterOptions::scale_regions (0: one h for the cloud)
   int scale_regions = 0;
   //! mesh suite: write its PNG pictures into this folder (empty: none)

@@ -102,16 +102,14 @@ double average_spacing(const PointCloud& cloud, int k = 6);
 //! normal. \throw InputError for fewer than kMinMeshPoints points.
 std::vector<Eigen::Vector3f> estimate_normals(const PointCloud& cloud, int k = 18, int mst_k = 0);
 
-//! The normals `scanclean filter --orient-normals k` gives a cloud without them, for the filter's
-//! FilterOptions::normals_orient_only: CGAL's PCA normals over k neighbours (the filter only
-//! takes their orientation; a jet fit cost 1.7x as much for the same benchmark figures within
-//! 3 %), oriented by CGAL::mst_orient_normals over max(6, k / 2). The MST's graph holds most of
-//! the memory (on the 290k merged bunny scans, k = 96: 2.6 GB peak with the MST over 96, 1.4 GB
-//! over 48), and over half of k it oriented the benchmark's shapes as well (bench/README.md,
-//! "Defaults"). \throw InputError for fewer than k + 1 points (or kMinMeshPoints).
+//! CGAL's oriented normals for a cloud without them, for the filter's
+//! FilterOptions::normals_orient_only: CGAL's PCA normals over k neighbours, oriented by
+//! CGAL::mst_orient_normals over max(6, k / 2). What `scanclean filter --orient-normals k` used
+//! before the filter oriented normals itself (FilterOptions::orient_k, the same recipe); kept as
+//! the benchmark's reference for it (`scanclean_bench --orient-normals-cgal`). The MST's graph
+//! holds most of the memory (on the 290k merged bunny scans, k = 96: 1.3 GB peak).
+//! \throw InputError for fewer than k + 1 points (or kMinMeshPoints).
 std::vector<Eigen::Vector3f> estimate_orienting_normals(const PointCloud& cloud, int k);
-//! The range of estimate_orienting_normals' k that `--orient-normals` accepts.
-constexpr int kMinOrientingK = 6, kMaxOrientingK = 200;
 //! The MST's neighbour count of estimate_orienting_normals for k: max(6, k / 2).
 int orienting_mst_k(int k);
 
