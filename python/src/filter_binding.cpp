@@ -55,6 +55,7 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["min_component_size"] = o.min_component_size;
   d["use_sensor_normals"] = o.use_sensor_normals;
   d["normals_orient_only"] = o.normals_orient_only;
+  d["orient_k"] = o.orient_k;
   d["use_confidences"] = o.use_confidences;
   d["threads"] = o.threads;
   return d;
@@ -148,6 +149,8 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.use_sensor_normals = as<bool>(v, k);
     else if (k == "normals_orient_only")
       o.normals_orient_only = as<bool>(v, k);
+    else if (k == "orient_k")
+      o.orient_k = as<int>(v, k);
     else if (k == "use_confidences")
       o.use_confidences = as<bool>(v, k);
     else if (k == "threads")
@@ -198,6 +201,8 @@ py::dict stats_to_dict(const FilterStats& s) {
   d["seconds_projection"] = s.seconds_projection;
   d["seconds_clustering"] = s.seconds_clustering;
   d["seconds_outliers"] = s.seconds_outliers;
+  d["orientation_trees"] = s.orientation_trees;
+  d["seconds_orientation"] = s.seconds_orientation;
   d["seconds_total"] = s.seconds_total;
   d["peak_rss_bytes"] = s.peak_rss_bytes;
   d["threads"] = s.threads;
