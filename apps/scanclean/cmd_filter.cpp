@@ -267,7 +267,6 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
       // 0.193 mm RMS from the sphere with them as the kernels' normals, 0.134 mm without, 0.138
       // mm as here).
       if (given > 0) o.normals_orient_only = true;
-
       grid_points += part.size();
     }
     append(cloud, part);

@@ -22,7 +22,8 @@ struct RangeGridNormalOptions {
 struct RangeGridNormals {
   std::vector<Eigen::Vector3f> normals;  //!< per point: unit, or zero where there is none
   std::size_t with_normal = 0;           //!< points that got one
-  std::size_t facing = 0;                //!< of those, how many face the scanner (n . toward > 0)
+  //! Of those, how many face the scanner once turned: n . toward > 0, or n . (viewpoint - p) > 0.
+  std::size_t facing = 0;
 };
 
 //! Per point of `scan`: the unit normal of the stencil's two central differences, all turned to
