@@ -50,8 +50,8 @@ struct FilterCommandOptions {
 };
 
 // --viewpoint: an organized input without normals gets its grid's (range_grid_normals), facing
-// the scanner at `viewpoint`; an input with normals keeps them; an unorganized one without is an
-// error, as no normal could be given to it. Returns the number of normals given.
+// the scanner at `viewpoint`; an input with normals keeps them; an unorganized one without is
+// left to the filter (FilterOptions::orient_viewpoint). Returns the number of normals given.
 std::size_t add_viewpoint_normals(const std::string& file, const std::vector<double>& viewpoint,
                                   PointCloud& part) {
   if (part.has_normals()) {
@@ -60,13 +60,7 @@ std::size_t add_viewpoint_normals(const std::string& file, const std::vector<dou
                  file.c_str());
     return 0;
   }
-  if (part.grid.empty())
-    throw OptionError(
-        "filter: --viewpoint gives normals from an organized cloud's grid (PLY range_grid, "
-        "PCD with HEIGHT > 1), and " +
-        file +
-        " is unorganized; for it, --orient-normals K estimates normals and orients them over a "
-        "neighbour graph");
+  if (part.grid.empty()) return 0;
   const Eigen::Vector3d at(viewpoint[0], viewpoint[1], viewpoint[2]);
   const RangeGridNormals n = range_grid_normals_from_viewpoint(part, at);
   if (n.with_normal == 0)
@@ -237,10 +231,6 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
       throw OptionError(
           "filter: --viewpoint applies to the input files (a --conf session's scans have "
           "their own normals); give an organized input file");
-    if (c.orient_normals > 0)
-      throw OptionError(
-          "filter: --viewpoint and --orient-normals exclude each other (the one orients by the "
-          "scanner's position, the other over a neighbour graph)");
     if (!o.use_sensor_normals)
       throw OptionError("filter: --viewpoint and --no-sensor-normals exclude each other");
   }
@@ -254,6 +244,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   PointCloud cloud;
   std::size_t files = 0;
   std::size_t grid_points = 0, grid_normals = 0;  // --viewpoint: inputs' points, with a normal
+  std::string unorganized;                        // --viewpoint: an input without a grid or normals
   for (const auto& in : c.inputs) {
     ReadReport report;
     PointCloud part = read_point_cloud(in, &report, xyz);
@@ -268,6 +259,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
       // mm as here).
       if (given > 0) o.normals_orient_only = true;
       grid_points += part.size();
+      if (part.grid.empty() && !part.has_normals()) unorganized = in;
     }
     append(cloud, part);
     ++files;
@@ -299,8 +291,16 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
         "invalid); nothing to filter");
   // Normals for a cloud without them, oriented by the filter itself (FilterOptions::orient_k):
   // they keep the sides of thin parts apart. Input normals are kept as they are.
-  const bool orienting = c.orient_normals > 0 && !cloud.has_normals();
-  if (orienting) o.orient_k = c.orient_normals;
+  // With --viewpoint, an unorganized cloud's PCA normals are turned to face the scanner instead.
+  if (!unorganized.empty() && grid_normals > 0)
+    throw OptionError(
+        "filter: --viewpoint with organized inputs (their grids' normals) and an "
+        "unorganized one (" +
+        unorganized + ", PCA normals): filter them separately");
+  const bool to_viewpoint = !unorganized.empty() && !cloud.has_normals();
+  const bool orienting = (c.orient_normals > 0 || to_viewpoint) && !cloud.has_normals();
+  if (orienting) o.orient_k = c.orient_normals > 0 ? c.orient_normals : kSuitedOrientK;
+  if (to_viewpoint) o.orient_viewpoint = {c.viewpoint[0], c.viewpoint[1], c.viewpoint[2]};
   FilterProgress progress(o);
   const FilterResult r = robust_filter(cloud, o);
   progress.finish();
@@ -331,21 +331,28 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   if (!c.outliers.empty()) sum.add("outliers file", collapsed ? "not written" : c.outliers);
   sum.add("output file", collapsed ? "not written (collapsed result)" : c.output);
   if (orienting) {
-    char text[160];
-    std::snprintf(text, sizeof text,
-                  "estimated (PCA over %d neighbours) and oriented (spanning forest over %d) in "
-                  "%.2f s",
-                  c.orient_normals, kOrientationGraphNeighbours, s.seconds_orientation);
+    char text[200];
+    if (to_viewpoint)
+      std::snprintf(text, sizeof text,
+                    "estimated (PCA over %d neighbours) and turned to face the viewpoint (%.4g, "
+                    "%.4g, %.4g) m in %.2f s",
+                    o.orient_k, c.viewpoint[0], c.viewpoint[1], c.viewpoint[2],
+                    s.seconds_orientation);
+    else
+      std::snprintf(text, sizeof text,
+                    "estimated (PCA over %d neighbours) and oriented (spanning forest over %d) in "
+                    "%.2f s",
+                    o.orient_k, kOrientationGraphNeighbours, s.seconds_orientation);
     sum.add("normals", text);
-  } else if (c.orient_normals > 0) {
-    sum.add("normals", "the input's normals (--orient-normals not needed)");
-  } else if (!c.viewpoint.empty()) {
+  } else if (grid_normals > 0) {
     char text[200];
     std::snprintf(text, sizeof text,
                   "the range grid, facing the viewpoint (%.4g, %.4g, %.4g) m, %s of %s points",
                   c.viewpoint[0], c.viewpoint[1], c.viewpoint[2],
                   with_thousands(grid_normals).c_str(), with_thousands(grid_points).c_str());
     sum.add("normals", text);
+  } else if (c.orient_normals > 0) {
+    sum.add("normals", "the input's normals (--orient-normals not needed)");
   } else if (!scan_normals.empty()) {
     sum.add("normals", scan_normals);
   }
@@ -450,13 +457,14 @@ const CommandRegistrar kRegistrar{{
                      "suits the benchmark's shapes and costs about 3 s and 150 MB per million "
                      "points. In [6, 200]; default 0 = off");
       cmd.add_option("--viewpoint", c->viewpoint,
-                     "X,Y,Z: where the scanner was, in the input's frame (metres; 0,0,0 for a "
-                     "depth camera's organized cloud in its own frame). An organized input "
-                     "without normals (PLY range_grid, PCD with HEIGHT > 1) gets its grid's "
-                     "normals, turned to face it: they orient the kernels' normals, so the "
-                     "output's normals face the scanner (as PCL's and Open3D's viewpoint "
-                     "orientation), and kernels fit only neighbours facing their way and with a "
-                     "normal (grid borders, depth jumps and hole edges have none)")
+                     "X,Y,Z: where the scanner was, for a cloud taken from one place, in the "
+                     "input's frame (metres; 0,0,0 for a depth camera's cloud in its own frame). "
+                     "An organized input without normals (PLY range_grid, PCD with HEIGHT > 1) "
+                     "gets its grid's normals, an unorganized one PCA normals (over "
+                     "--orient-normals K neighbours, default 96), turned to face it: they orient "
+                     "the kernels' normals, so the output's normals face the scanner (as PCL's "
+                     "and Open3D's viewpoint orientation), and kernels fit only neighbours facing "
+                     "their way (grid borders, depth jumps and hole edges have no grid normal)")
           ->expected(3)
           ->delimiter(',');
       auto values = add_filter_options(cmd);

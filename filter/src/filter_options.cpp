@@ -60,6 +60,14 @@ void validate(const FilterOptions& o) {
     bad_option("scale_regions", to_str(o.scale_regions),
                "0 unless the scale is automatic with the scale test on (scale_gamma > 0)");
   if (o.orient_k != 0) check_int("orient_k", o.orient_k, kMinOrientK, kMaxOrientK);
+  if (o.orient_viewpoint) {
+    const auto& v = *o.orient_viewpoint;
+    if (!(std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2])))
+      bad_option("orient_viewpoint", to_str(v[0]) + ", " + to_str(v[1]) + ", " + to_str(v[2]),
+                 "three finite coordinates (metres)");
+    if (o.orient_k == 0)
+      bad_option("orient_viewpoint", "set", "only with orient_k (the normals it orients)");
+  }
   check_int("kernel_stride", o.kernel_stride, 0, 64);
   check_real("slab", o.slab, 0, 10, true);
   check_real("eigen_floor", o.eigen_floor, 0, 1, true);

@@ -84,7 +84,8 @@ SpanningForest orient_along_spanning_forest(std::size_t n, std::vector<Orientati
 }
 
 OrientedPointNormals orient_normals(const std::vector<Eigen::Vector3f>& p, int k,
-                                    const FilterOptions& o) {
+                                    const FilterOptions& o,
+                                    const std::optional<Eigen::Vector3f>& viewpoint) {
   const std::size_t n = p.size();
   OrientedPointNormals out;
   out.normals.assign(n, Eigen::Vector3f::UnitZ());
@@ -118,7 +119,7 @@ OrientedPointNormals orient_normals(const std::vector<Eigen::Vector3f>& p, int k
   const std::vector<std::uint32_t>& order = index.order();
   std::vector<Eigen::Vector3f> normal(n);
   // Per slot: its PCA normal and its kg nearest others (slots).
-  std::vector<std::uint32_t> near(n * kg);
+  std::vector<std::uint32_t> near(viewpoint ? 0 : n * kg);
   parallel_each_reporting(n, o, "orientation", [&](std::size_t s) {
     const Eigen::Vector3f& q = index.slot_point(s);
     thread_local std::vector<std::pair<float, std::uint32_t>> nn;
@@ -157,6 +158,10 @@ OrientedPointNormals orient_normals(const std::vector<Eigen::Vector3f>& p, int k
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
     es.computeDirect(cov);
     normal[s] = es.eigenvectors().col(0).cast<float>().normalized();
+    if (viewpoint) {  // turned to face the scanner; no graph
+      if (normal[s].dot(*viewpoint - q) < 0) normal[s] = -normal[s];
+      return;
+    }
     // The graph's neighbours: the nearest others (the point itself comes first, at distance 0,
     // unless a duplicate of it sits in an earlier slot).
     std::size_t t = 0;
@@ -164,6 +169,10 @@ OrientedPointNormals orient_normals(const std::vector<Eigen::Vector3f>& p, int k
       if (nn[u].second != s) near[s * kg + t++] = nn[u].second;
     for (; t < kg; ++t) near[s * kg + t] = static_cast<std::uint32_t>(s);  // none: a self loop
   });
+  if (viewpoint) {
+    parallel_each(n, [&](std::size_t s) { out.normals[order[s]] = normal[s]; });
+    return out;
+  }
   // The graph's edges, each pair once (a pair whose two points list each other is taken from
   // the smaller one's list), in slot order: counted, then filled.
   auto listed = [&](std::uint32_t a, std::uint32_t b) {  // b among a's neighbours

@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "scanclean/filter/filter_options.h"
@@ -45,8 +46,10 @@ struct OrientedPointNormals {
 
 //! Oriented normals for the points `p` (metres, any local frame): PCA over each point's k
 //! nearest (itself included), oriented along the spanning forest of the graph of the
-//! kOrientationGraphNeighbours nearest. Parallel, and the same for any thread count.
+//! kOrientationGraphNeighbours nearest; or, given a `viewpoint` (in p's frame), each turned to
+//! face it (no graph; trees = 0). Parallel, and the same for any thread count.
 OrientedPointNormals orient_normals(const std::vector<Eigen::Vector3f>& p, int k,
-                                    const FilterOptions& o);
+                                    const FilterOptions& o,
+                                    const std::optional<Eigen::Vector3f>& viewpoint = {});
 
 }  // namespace scanclean::detail

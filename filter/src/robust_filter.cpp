@@ -217,7 +217,13 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
     // A cloud without normals in use gets oriented ones first (orientation.h); from here on the
     // filter runs as on input normals that only orient.
     const auto t_orient = Clock::now();
-    detail::OrientedPointNormals on = detail::orient_normals(pf, o.orient_k, o);
+    std::optional<Eigen::Vector3f> viewpoint;
+    if (o.orient_viewpoint)
+      viewpoint = (Eigen::Vector3d((*o.orient_viewpoint)[0], (*o.orient_viewpoint)[1],
+                                   (*o.orient_viewpoint)[2]) -
+                   origin)
+                      .cast<float>();
+    detail::OrientedPointNormals on = detail::orient_normals(pf, o.orient_k, o, viewpoint);
     in.v = std::move(on.normals);
     in.v_orients_only = true;
     use_v = true;

@@ -3,7 +3,9 @@
 #include <pybind11/functional.h>
 #include <pybind11/stl.h>
 
+#include <array>
 #include <string>
+#include <vector>
 
 #include "cloud_arrays.h"
 #include "scanclean/core/errors.h"
@@ -56,6 +58,11 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["use_sensor_normals"] = o.use_sensor_normals;
   d["normals_orient_only"] = o.normals_orient_only;
   d["orient_k"] = o.orient_k;
+  if (o.orient_viewpoint)
+    d["orient_viewpoint"] = py::make_tuple((*o.orient_viewpoint)[0], (*o.orient_viewpoint)[1],
+                                           (*o.orient_viewpoint)[2]);
+  else
+    d["orient_viewpoint"] = py::none();
   d["use_confidences"] = o.use_confidences;
   d["threads"] = o.threads;
   return d;
@@ -151,7 +158,21 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.normals_orient_only = as<bool>(v, k);
     else if (k == "orient_k")
       o.orient_k = as<int>(v, k);
-    else if (k == "use_confidences")
+    else if (k == "orient_viewpoint") {
+      if (v.is_none()) {
+        o.orient_viewpoint.reset();
+      } else {
+        std::vector<double> xyz;
+        try {
+          xyz = v.cast<std::vector<double>>();
+        } catch (const py::cast_error&) {
+        }
+        if (xyz.size() != 3)
+          throw OptionError("orient_viewpoint: expected None or three numbers (x, y, z), got " +
+                            std::string(py::repr(v)));
+        o.orient_viewpoint = std::array<double, 3>{xyz[0], xyz[1], xyz[2]};
+      }
+    } else if (k == "use_confidences")
       o.use_confidences = as<bool>(v, k);
     else if (k == "threads")
       o.threads = as<int>(v, k);

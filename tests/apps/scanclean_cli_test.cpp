@@ -377,14 +377,27 @@ TEST(ScancleanCliTest, ViewpointGivesAnOrganizedCloudItsGridsNormalsFacingTheSca
   const ProgramRun beside = filter("frame.pcd", {"--viewpoint", "1,0,0.7"});
   EXPECT_EQ(beside.exit_code, 0) << beside.err;
   EXPECT_TRUE(contains(beside.err, "face the viewpoint")) << beside.err;
-  // Unorganized, or a bad viewpoint, or with --orient-normals: exit 2 naming the reason, before
-  // anything is written.
+  // Unorganized: PCA normals turned to face the viewpoint, the same way.
   cloud.grid = OrganizedGrid{};
   write_point_cloud(dir / "loose.ply", cloud);
+  const ProgramRun loose = filter("loose.ply", {"--viewpoint", "0,0,0", "--orient-normals", "24"});
+  ASSERT_EQ(loose.exit_code, 0) << loose.err;
+  EXPECT_TRUE(contains(loose.out,
+                       "estimated (PCA over 24 neighbours) and turned to face the "
+                       "viewpoint (0, 0, 0) m"))
+      << loose.out;
+  const PointCloud l = read_point_cloud(dir / "out.ply");
+  EXPECT_GT(facing_share(l), 0.999);
+  EXPECT_LT(rms_radius(l), 1.1 * rms_radius(p));
+  // Organized and unorganized together, or a bad viewpoint: exit 2 naming the reason, before
+  // anything is written.
   fs::remove(dir / "out.ply");
-  const ProgramRun loose = filter("loose.ply", {"--viewpoint", "0,0,0"});
-  EXPECT_EQ(loose.exit_code, 2);
-  EXPECT_TRUE(contains(loose.err, "loose.ply") && contains(loose.err, "unorganized")) << loose.err;
+  const ProgramRun mixed =
+      run({"filter", (dir / "frame.pcd").string(), (dir / "loose.ply").string(), "-o",
+           (dir / "out.ply").string(), "--viewpoint", "0,0,0"},
+          dir);
+  EXPECT_EQ(mixed.exit_code, 2);
+  EXPECT_TRUE(contains(mixed.err, "loose.ply") && contains(mixed.err, "separately")) << mixed.err;
   const ProgramRun two = filter("frame.pcd", {"--viewpoint", "0,0"});
   EXPECT_EQ(two.exit_code, 2);
   EXPECT_TRUE(contains(two.err, "--viewpoint")) << two.err;

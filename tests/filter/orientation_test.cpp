@@ -141,5 +141,22 @@ TEST(OrientationTest, OpenSheetFacesUpAndFewPointsStillGetNormals) {
   for (const Eigen::Vector3f& n : small.normals) EXPECT_GT(n.z(), 0.9f);
 }
 
+TEST(OrientationTest, AViewpointTurnsEachNormalToFaceIt) {
+  // The cap of a sphere that a scanner 5 above it sees: every normal faces the scanner, which
+  // there is outwards; seen from the centre, every normal faces inwards. No graph: no trees.
+  std::vector<Eigen::Vector3f> cap;
+  for (const Eigen::Vector3f& p : sphere(8000, Eigen::Vector3f::Zero(), 1.0f, 0.01f, 46))
+    if (p.z() > 0.4f) cap.push_back(p);  // seed 46
+  const OrientedPointNormals above =
+      orient_normals(cap, 48, FilterOptions{}, Eigen::Vector3f(0, 0, 5));
+  const OrientedPointNormals centre =
+      orient_normals(cap, 48, FilterOptions{}, Eigen::Vector3f::Zero());
+  EXPECT_EQ(above.trees, 0u);
+  for (std::size_t i = 0; i < cap.size(); ++i) {
+    EXPECT_GT(above.normals[i].dot(cap[i].normalized()), 0.9f) << i;
+    EXPECT_EQ(centre.normals[i], -above.normals[i]) << i;
+  }
+}
+
 }  // namespace
 }  // namespace scanclean::detail

@@ -835,6 +835,19 @@ TEST(RobustFilterTest, OrientKGivesACloudWithoutNormalsConsistentOnes) {
   // Out of range.
   o.orient_k = kMinOrientK - 1;
   EXPECT_THROW(robust_filter(bare, o), OptionError);
+  // A viewpoint inside the sphere: every output normal faces it, inwards. A viewpoint needs
+  // orient_k, and finite coordinates.
+  o.orient_k = 48;
+  o.orient_viewpoint = std::array<double, 3>{0.0, 0.0, 0.0};
+  const FilterResult inward = robust_filter(bare, o);
+  EXPECT_EQ(inward.stats.orientation_trees, 0u);
+  EXPECT_LT(outward(inward.cloud), 0.001);
+  EXPECT_LT(rms_radius(inward.cloud), 1.02 * rms_radius(plain.cloud));
+  o.orient_viewpoint = std::array<double, 3>{0.0, NAN, 0.0};
+  EXPECT_THROW(robust_filter(bare, o), OptionError);
+  o.orient_viewpoint = std::array<double, 3>{0.0, 0.0, 0.0};
+  o.orient_k = 0;
+  EXPECT_THROW(robust_filter(bare, o), OptionError);
 }
 
 }  // namespace

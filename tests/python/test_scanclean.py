@@ -107,7 +107,8 @@ def test_options_match_the_cpp_defaults_and_are_all_accepted():
     "cli_args,py_options",
     [([], {}), (["--h", "0.002", "--tau", "0.2", "--merge-eps", "0"],
                 {"h": 0.002, "tau": 0.2, "merge_eps": 0.0}),
-     (["--orient-normals", "24"], {"orient_k": 24})],
+     (["--orient-normals", "24"], {"orient_k": 24}),
+     (["--viewpoint", "0,0,1"], {"orient_k": 96, "orient_viewpoint": (0.0, 0.0, 1.0)})],
 )
 def test_filter_identical_to_the_program(tmp_path, cli_args, py_options):
     cli_out, cli_outliers = tmp_path / "cli.ply", tmp_path / "cli_outliers.ply"
