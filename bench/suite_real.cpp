@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -53,6 +54,31 @@ DistanceStats distance_stats(const MeshDistance& md, const std::vector<Eigen::Ve
   return s;
 }
 
+// robust_filter on `scan` three ways: without normals, with `normals` that only orient (as
+// `scanclean filter --viewpoint` gives a grid's), and with `normals` as the kernels' normals.
+std::array<FilterRun, 3> three_ways(const PointCloud& scan,
+                                    const std::vector<Eigen::Vector3f>& normals,
+                                    const FilterSettings& fs) {
+  std::array<FilterRun, 3> runs;
+  for (int k = 0; k < 3; ++k) {
+    PointCloud c = scan;
+    if (k > 0) c.normals = normals;
+    FilterSettings f = fs;
+    f.normals_orient_only = k == 1;
+    runs[k] = run_robust_filter(c, f);
+  }
+  return runs;
+}
+
+// The share of c's normals that face `viewpoint`, as a percentage with one decimal.
+std::string facing_share(const PointCloud& c, const Eigen::Vector3d& viewpoint) {
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < c.size(); ++i)
+    n += c.normals[i].cast<double>().dot(viewpoint - c.positions[i]) > 0 ? 1 : 0;
+  return fmt_pct(static_cast<double>(n) / static_cast<double>(std::max<std::size_t>(1, c.size())),
+                 1);
+}
+
 // One organized scan alone (bun000.ply, in bun_zipper.ply's frame): robust_filter without
 // normals, with its grid's normals turned to face the scanner as `scanclean filter --viewpoint`
 // gives them (they only orient), and with the same normals as the kernels' normals (as sensor
@@ -76,29 +102,16 @@ void single_scan_table(Context& ctx, const MeshDistance& md, const FilterSetting
   const DistanceStats in = distance_stats(md, cloud.positions);
   t.rows.push_back({"bun000.ply (input)", fmt_count(cloud.size()), fmt(in.mean * 1e3, 4),
                     fmt(in.p95 * 1e3, 4), fmt(in.rms * 1e3, 4), "-", "-"});
-  auto facing = [&](const PointCloud& c) {
-    std::size_t n = 0;
-    for (std::size_t i = 0; i < c.size(); ++i)
-      n += c.normals[i].cast<double>().dot(viewpoint - c.positions[i]) > 0 ? 1 : 0;
-    return fmt_pct(static_cast<double>(n) / static_cast<double>(std::max<std::size_t>(1, c.size())),
-                   1);
-  };
-  struct Variant {
-    std::string name;
-    bool normals, orient_only;
-  };
-  for (const Variant& v :
-       {Variant{"robust_filter, no normals", false, false},
-        Variant{"robust_filter, grid normals that orient (--viewpoint 0,0,1)", true, true},
-        Variant{"robust_filter, grid normals as the kernels' normals", true, false}}) {
-    PointCloud c = cloud;
-    if (v.normals) c.normals = grid.normals;
-    FilterSettings f = fs;
-    f.normals_orient_only = v.orient_only;
-    const FilterRun r = run_robust_filter(c, f);
+  const char* names[3] = {"robust_filter, no normals",
+                          "robust_filter, grid normals that orient (--viewpoint 0,0,1)",
+                          "robust_filter, grid normals as the kernels' normals"};
+  const std::array<FilterRun, 3> runs = three_ways(cloud, grid.normals, fs);
+  for (int k = 0; k < 3; ++k) {
+    const FilterRun& r = runs[k];
     const DistanceStats s = distance_stats(md, r.cloud.positions);
-    t.rows.push_back({v.name, fmt_count(r.cloud.size()), fmt(s.mean * 1e3, 4), fmt(s.p95 * 1e3, 4),
-                      fmt(s.rms * 1e3, 4), facing(r.cloud), fmt(r.seconds_wall, 2)});
+    t.rows.push_back({names[k], fmt_count(r.cloud.size()), fmt(s.mean * 1e3, 4),
+                      fmt(s.p95 * 1e3, 4), fmt(s.rms * 1e3, 4), facing_share(r.cloud, viewpoint),
+                      fmt(r.seconds_wall, 2)});
   }
   // The same three on a depth camera's range image (synthetic: exact distances): a camera at
   // the origin looking along +z at a sphere of radius 0.3 m centred 1 m away, 240 x 240 pixels
@@ -130,22 +143,16 @@ void single_scan_table(Context& ctx, const MeshDistance& md, const FilterSetting
     };
     t.rows.push_back({"sphere range image (synthetic, 1 mm noise): input", fmt_count(image.size()),
                       "-", "-", fmt(rms(image) * 1e3, 4), "-", "-"});
-    for (const Variant& v :
-         {Variant{"sphere range image: robust_filter, no normals", false, false},
-          Variant{"sphere range image: grid normals that orient (--viewpoint 0,0,0)", true, true},
-          Variant{"sphere range image: grid normals as the kernels' normals", true, false}}) {
-      PointCloud c = image;
-      if (v.normals) c.normals = in.normals;
-      FilterSettings f = fs;
-      f.normals_orient_only = v.orient_only;
-      const FilterRun r = run_robust_filter(c, f);
-      std::size_t toward = 0;
-      for (std::size_t i = 0; i < r.cloud.size(); ++i)
-        toward += r.cloud.normals[i].cast<double>().dot(-r.cloud.positions[i]) > 0 ? 1 : 0;
-      const double share = static_cast<double>(toward) /
-                           static_cast<double>(std::max<std::size_t>(1, r.cloud.size()));
-      t.rows.push_back({v.name, fmt_count(r.cloud.size()), "-", "-", fmt(rms(r.cloud) * 1e3, 4),
-                        fmt_pct(share, 1), fmt(r.seconds_wall, 2)});
+    const char* sphere_names[3] = {
+        "sphere range image: robust_filter, no normals",
+        "sphere range image: grid normals that orient (--viewpoint 0,0,0)",
+        "sphere range image: grid normals as the kernels' normals"};
+    const std::array<FilterRun, 3> sphere_runs = three_ways(image, in.normals, fs);
+    for (int k = 0; k < 3; ++k) {
+      const FilterRun& r = sphere_runs[k];
+      t.rows.push_back({sphere_names[k], fmt_count(r.cloud.size()), "-", "-",
+                        fmt(rms(r.cloud) * 1e3, 4), facing_share(r.cloud, Eigen::Vector3d::Zero()),
+                        fmt(r.seconds_wall, 2)});
     }
     t.notes.push_back(
         "Sphere range image rows: RMS of the distances to the exact sphere (mm); "

@@ -5,11 +5,13 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <cmath>
 #include <limits>
 #include <mutex>
 #include <nanoflann.hpp>
 #include <utility>
 
+#include "parallel.h"
 #include "radix_sort.h"
 
 namespace scanclean {
@@ -266,6 +268,25 @@ void NeighborIndex::knn(const Eigen::Vector3f& q, std::size_t k,
   out.resize(found);
   for (std::size_t i = 0; i < found; ++i) out[i] = {d2[i], ids_[idx[i]]};
   std::sort(out.begin(), out.end());
+}
+
+double rough_kth_distance(const std::vector<Eigen::Vector3f>& p, std::size_t kk,
+                          std::size_t samples) {
+  const std::size_t n = p.size(), m = std::min(n, samples);
+  if (m == 0) return 0;
+  const std::size_t step = std::clamp<std::size_t>(n / (8 * kk), 1, 16);
+  std::vector<Eigen::Vector3f> sub;
+  sub.reserve(n / step + 1);
+  for (std::size_t i = 0; i < n; i += step) sub.push_back(p[i]);
+  const NeighborIndex tree(std::move(sub), 0.0);  // k-d tree only
+  const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
+  std::vector<double> est(m, 0.0);
+  detail::parallel_each(m, [&](std::size_t k) {
+    thread_local std::vector<std::pair<float, std::uint32_t>> nn;
+    tree.knn(p[k * n / m], ks, nn);
+    est[k] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
+  });
+  return detail::median_of(est);
 }
 
 }  // namespace scanclean

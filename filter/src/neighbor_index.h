@@ -251,4 +251,11 @@ bool NeighborIndex::for_each_cell_run(const Eigen::Vector3f& q, float r, F&& f) 
   return true;
 }
 
+//! A rough median distance from a point to its kk-th nearest (itself counted) at `samples` evenly
+//! spread points p[k n / samples], k < samples: the (kk / step)-th neighbour in a k-d tree over
+//! every step-th point, step = clamp(n / (8 kk), 1, 16). Only to size grids and first query
+//! radii; the distances that matter are then measured exactly. 0 for an empty set.
+double rough_kth_distance(const std::vector<Eigen::Vector3f>& p, std::size_t kk,
+                          std::size_t samples);
+
 }  // namespace scanclean

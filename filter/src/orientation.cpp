@@ -92,26 +92,11 @@ OrientedPointNormals orient_normals(const std::vector<Eigen::Vector3f>& p, int k
   if (n < 2) return out;
   const std::size_t kk = std::min<std::size_t>(static_cast<std::size_t>(k) + 1, n);  // + itself
   const std::size_t kg = std::min<std::size_t>(kOrientationGraphNeighbours, kk - 1);
-  // The grid's cell: 1.3 x the median distance to the kk-th point at 1,000 sampled points, from a
-  // k-d tree over every step-th point (the kk / step-th neighbour there), so that the 27 cells
-  // around a point nearly always hold its kk nearest (the others search farther, below).
-  double cell = 0;
-  {
-    const std::size_t step = std::clamp<std::size_t>(n / (8 * kk), 1, 16);
-    std::vector<Eigen::Vector3f> sub;
-    for (std::size_t i = 0; i < n; i += step) sub.push_back(p[i]);
-    const NeighborIndex tree(std::move(sub), 0.0);  // k-d tree only
-    const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
-    const std::size_t m = std::min<std::size_t>(n, 1000);
-    std::vector<double> dk(m);
-    parallel_each(m, [&](std::size_t s) {
-      thread_local std::vector<std::pair<float, std::uint32_t>> nn;
-      tree.knn(p[s * n / m], ks, nn);
-      dk[s] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
-    });
-    cell = 1.3 * median_of(dk);
-    if (!(cell > 0)) cell = 1e-6;
-  }
+  // The grid's cell: 1.3 x a rough median distance to the kk-th point (at 1,000 points), so
+  // that the 27 cells around a point nearly always hold its kk nearest (the others search
+  // farther, below).
+  double cell = 1.3 * rough_kth_distance(p, kk, 1000);
+  if (!(cell > 0)) cell = 1e-6;
   const NeighborIndex index(p, cell);
   const float reach = index.max_adjacent_radius();
   // Everything below works on grid slots (index.order(): neighbours lie in a few runs of

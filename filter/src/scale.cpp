@@ -47,22 +47,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
     std::vector<std::size_t> sample(M);
     for (std::size_t k = 0; k < M; ++k) sample[k] = k * N / M;
     const std::size_t kk = static_cast<std::size_t>(K) + 1;
-    const std::size_t step = std::clamp<std::size_t>(N / (8 * kk), 1, 16);
-    double r_est = 0;
-    {
-      std::vector<Eigen::Vector3f> sub;
-      sub.reserve(N / step + 1);
-      for (std::size_t i = 0; i < N; i += step) sub.push_back(pf[i]);
-      NeighborIndex tree(std::move(sub), 0.0);  // k-d tree only
-      const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
-      std::vector<double> est(M, 0.0);
-      parallel_each(M, [&](std::size_t k) {
-        thread_local std::vector<std::pair<float, std::uint32_t>> nn;
-        tree.knn(pf[sample[k]], ks, nn);
-        est[k] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
-      });
-      r_est = median_of(est);
-    }
+    double r_est = rough_kth_distance(pf, kk, M);
     if (!(r_est > 0)) r_est = fallback_h;
     const float r_max = static_cast<float>(2 * diag + fallback_h);
     // kAdaptive queries every point, in the 27 cells around its own: cells of 1.5 r hold the
