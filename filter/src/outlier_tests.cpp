@@ -2,10 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <numeric>
 
-#include "cell_select.h"
+#include "cell_groups.h"
 #include "neighbor_index.h"
 #include "parallel.h"
 #include "select.h"
@@ -16,6 +17,40 @@ namespace {
 // The displacement test computes the median and MAD of the moves around every
 // kDisplacementAnchor-th representative (in grid order) and screens the points near it with them.
 constexpr std::size_t kDisplacementAnchor = 8;
+
+// The around points near a group of queries, copied compactly (select_near_box) with their
+// around index, count and likelihood; padded with +inf to a multiple of 8 for select_within.
+struct NearPoints {
+  std::vector<float> x, y, z, lik;
+  std::vector<std::uint32_t> at, cnt;
+  std::size_t n = 0;
+  // Room for m points and the padding or a whole vector past them.
+  void reserve(std::size_t m) {
+    if (x.size() >= m + 16) return;
+    for (auto* v : {&x, &y, &z, &lik}) v->resize(2 * m + 16);
+    for (auto* v : {&at, &cnt}) v->resize(2 * m + 16);
+  }
+  void clear() { n = 0; }
+  void push(float px, float py, float pz, std::uint32_t t, std::uint32_t c, float l) {
+    reserve(n + 1);
+    x[n] = px;
+    y[n] = py;
+    z[n] = pz;
+    at[n] = t;
+    cnt[n] = c;
+    lik[n] = l;
+    ++n;
+  }
+  std::size_t padded() const { return (n + 7) / 8 * 8; }
+  void pad() {
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    for (std::size_t k = n; k < padded(); ++k) {
+      x[k] = y[k] = z[k] = kInf;
+      at[k] = cnt[k] = 0;
+      lik[k] = 0;
+    }
+  }
+};
 
 std::uint32_t find_root(std::vector<std::uint32_t>& parent, std::uint32_t a) {
   while (parent[a] != a) {
@@ -90,42 +125,127 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
           moved[s] = static_cast<float>(step.dot(pr.normal[i].cast<double>()));
         });
       // When the kernels are thinned (h raised for the noise), so is this pass: both sums run
-      // over every stride-th output point (slots are in grid order: an even subsample, about
-      // K_h of them within h instead of K_h stride), and rho is scaled back by the stride. With
-      // a stride of 1 both are exact.
+      // over the around points, every stride-th output point (slots are in grid order: an even
+      // subsample, about K_h of them within h instead of K_h stride), and rho is scaled back by
+      // the stride. With a stride of 1 both are exact. Around point t is slot t * stride; the
+      // values the passes read of it are copied in that order, so that the around points of a
+      // cell's neighbourhood are consecutive.
       const std::size_t stride = in.stride;
-      std::unique_ptr<NeighborIndex> thinned;
-      if (stride > 1) {
-        std::vector<Eigen::Vector3f> sub((R + stride - 1) / stride);
-        parallel_each(sub.size(), [&](std::size_t k) { sub[k] = ridx.slot_point(k * stride); });
-        thinned = std::make_unique<NeighborIndex>(std::move(sub), in.cell * 1.001);
-      }
-      // The values the passes read of the points around: with a thinned index, copied into its
-      // slot order, so that the points of a query's cells are read from consecutive entries.
-      const std::size_t T = thinned ? thinned->size() : 0;
-      std::vector<std::uint32_t> cnt_t(T);
-      std::vector<float> lik_t(by_l ? T : 0), moved_t(by_d ? T : 0);
-      if (thinned) {
-        const std::vector<std::uint32_t>& id = thinned->order();
-        parallel_each(T, [&](std::size_t t) {
-          const std::size_t q = id[t] * stride;
+      const std::size_t T = (R + stride - 1) / stride;
+      std::vector<float> ax(T), ay(T), az(T);
+      std::vector<std::uint32_t> at(T);  // t itself, which the compact copies carry along
+      std::vector<std::uint32_t> cnt_t(stride > 1 ? T : 0);
+      std::vector<float> lik_t(by_l && stride > 1 ? T : 0), moved_t(by_d && stride > 1 ? T : 0);
+      parallel_each(T, [&](std::size_t t) {
+        const std::size_t q = t * stride;
+        const Eigen::Vector3f& p = ridx.slot_point(q);
+        ax[t] = p.x();
+        ay[t] = p.y();
+        az[t] = p.z();
+        at[t] = static_cast<std::uint32_t>(t);
+        if (stride > 1) {
           cnt_t[t] = cnt[q];
           if (by_l) lik_t[t] = lik[q];
           if (by_d) moved_t[t] = moved[q];
+        }
+      });
+      const std::uint32_t* around_cnt = stride > 1 ? cnt_t.data() : cnt.data();
+      const float* around_lik = stride > 1 ? lik_t.data() : lik.data();
+      const float* around_moved = stride > 1 ? moved_t.data() : moved.data();
+      const SelectLoops loops = select_loops();  // dispatched once, called per run
+      // Calls f(s, near) for each slot s of cell c of ridx with want(s); near holds every around
+      // point within hs[s] of s, among others. Slots whose h lies within the grid's reach go in
+      // octant groups (cell_groups.h), each with the around points within its largest h of its
+      // box, copied from the 27 cells' runs (on the 2.1M-point sphere at k = 250, 370 points
+      // per query instead of the 905 of the 27 cells); the others take the index's own query.
+      auto for_cell = [&](std::size_t c, auto&& want, auto&& f) {
+        struct Run {
+          std::size_t b, e;        // around points [b, e)
+          Eigen::Vector3f lo, hi;  // their bounding box
+        };
+        thread_local std::vector<Run> runs;
+        thread_local std::vector<std::uint32_t> queries;
+        thread_local OctantGroups groups;
+        thread_local NearPoints near;
+        queries.clear();
+        const std::uint32_t cb = ridx.cell_begin(c), ce = ridx.cell_begin(c + 1);
+        for (std::uint32_t s = cb; s < ce; ++s) {
+          if (!want(s)) continue;
+          const Eigen::Vector3f& q = ridx.slot_point(s);
+          if (hs[s] > 0 && ridx.adjacent_cell(q, hs[s]) == static_cast<std::int64_t>(c)) {
+            queries.push_back(s);
+            continue;
+          }
+          // Every around point of the cells the query's ball touches (f tests the distances),
+          // else (a ball too large for the grid) those the index finds within h.
+          near.clear();
+          auto add = [&](std::size_t t) {
+            near.push(ax[t], ay[t], az[t], static_cast<std::uint32_t>(t), around_cnt[t],
+                      by_l ? around_lik[t] : 0.0f);
+          };
+          if (!ridx.for_each_cell_run(q, hs[s], [&](std::uint32_t b, std::uint32_t e) {
+                for (std::size_t t = (b + stride - 1) / stride; t < (e + stride - 1) / stride; ++t)
+                  add(t);
+              }))
+            ridx.for_each_slot_within(q, hs[s], [&](std::uint32_t p, float) {
+              if (p % stride == 0) add(p / stride);
+            });
+          near.pad();
+          f(s, near);
+        }
+        if (queries.empty()) return;
+        runs.clear();
+        std::size_t total = 0;
+        ridx.for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) {
+          const std::size_t tb = (b + stride - 1) / stride, te = (e + stride - 1) / stride;
+          if (tb >= te) return;
+          Run run{tb, te, {ax[tb], ay[tb], az[tb]}, {ax[tb], ay[tb], az[tb]}};
+          for (std::size_t t = tb + 1; t < te; ++t) {
+            const Eigen::Vector3f p(ax[t], ay[t], az[t]);
+            run.lo = run.lo.cwiseMin(p);
+            run.hi = run.hi.cwiseMax(p);
+          }
+          runs.push_back(run);
+          total += te - tb;
         });
-      }
-      const std::uint32_t* around_cnt = thinned ? cnt_t.data() : cnt.data();
-      const float* around_lik = thinned ? lik_t.data() : lik.data();
-      const float* around_moved = thinned ? moved_t.data() : moved.data();
-      // Through the per-thread cell cache (cell_select.h): the same points as the index's own
-      // radius query, in its order; each indexes around_cnt, around_lik and around_moved.
-      // Without the cache's parts: on the 2.1M-point sphere at k = 250 a part served three
-      // queries and cost more to make than it saved.
-      const std::uint64_t cell_key = new_cell_cache_key();
-      // The points around s: a pointer to them (valid until the next call) and their count.
-      auto around = [&](std::size_t s) {
-        return thread_cell_select().slots_within(thinned ? *thinned : ridx, cell_key,
-                                                 ridx.slot_point(s), hs[s], false);
+        near.reserve(total);
+        group_by_octant(
+            queries.size(),
+            [&](std::size_t k) -> const Eigen::Vector3f& { return ridx.slot_point(queries[k]); },
+            groups);
+        for (std::uint8_t g = 0; g < 8; ++g) {
+          if (groups.members[g] == 0) continue;
+          float reach = 0;
+          for (std::size_t k = 0; k < queries.size(); ++k)
+            if (groups.octant[k] == g) reach = std::max(reach, hs[queries[k]]);
+          // As in scale.cpp: the rounded squared distance to the box is at most that to any
+          // query in it, so the points within a member's h are all kept; 0.1 % more to spare.
+          const float w2 = reach * reach * 1.001f;
+          const Eigen::Vector3f &glo = groups.lo[g], &ghi = groups.hi[g];
+          const float glo3[3] = {glo.x(), glo.y(), glo.z()}, ghi3[3] = {ghi.x(), ghi.y(), ghi.z()};
+          near.clear();
+          for (const Run& run : runs) {
+            const float g2 = (run.lo - ghi).cwiseMax(glo - run.hi).cwiseMax(0.0f).squaredNorm();
+            if (g2 < w2)
+              loops.select_near_box(
+                  ax.data() + run.b, ay.data() + run.b, az.data() + run.b, at.data() + run.b,
+                  by_l ? around_lik + run.b : nullptr, run.e - run.b, glo3, ghi3, w2,
+                  {near.x.data(), near.y.data(), near.z.data(), near.at.data(), near.lik.data()},
+                  near.n);
+          }
+          for (std::size_t k = 0; k < near.n; ++k) near.cnt[k] = around_cnt[near.at[k]];
+          near.pad();
+          for (std::size_t k = 0; k < queries.size(); ++k)
+            if (groups.octant[k] == g) f(queries[k], near);
+        }
+      };
+      // The around points within h of s, as around indices t, into hits; returns their count.
+      auto around = [&](std::size_t s, const NearPoints& near, std::vector<std::uint32_t>& hits) {
+        const Eigen::Vector3f& q = ridx.slot_point(s);
+        const float qa[3] = {q.x(), q.y(), q.z()};
+        hits.resize(near.padded());
+        return select_within(near.x.data(), near.y.data(), near.z.data(), near.at.data(),
+                             near.padded(), qa, hs[s] * hs[s], hits.data());
       };
       // Displacement test: the median of the moves around s and 1.4826 x their median absolute
       // deviation (the robust standard deviation), floored at 0.02 h; none (scale 0) when fewer
@@ -152,66 +272,63 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         m.scale = std::max(1.4826f * mad, 0.02f * hs[s]);
         return m;
       };
+      // The moves of the around points within h of s, their statistics.
+      auto move_stats_at = [&](std::size_t s, const NearPoints& near) {
+        thread_local std::vector<std::uint32_t> hits;
+        thread_local std::vector<float> around_d;
+        const std::size_t na = around(s, near, hits);
+        around_d.resize(na);
+        for (std::size_t k = 0; k < na; ++k) around_d[k] = around_moved[hits[k]];
+        return move_stats(around_d, s);
+      };
       auto is_displaced = [&](std::size_t s, const MoveStats& m) {
         return m.scale > 0 && static_cast<double>(std::abs(moved[s] - m.median)) >
                                   o.displacement_sigma * static_cast<double>(m.scale);
       };
-      // The points around in a struct of arrays (the around index's slot order), for the
-      // one-pass counts of points that are not anchors (select.h count_within).
-      const NeighborIndex& aidx = thinned ? *thinned : ridx;
-      std::vector<float> ax(aidx.size()), ay(aidx.size()), az(aidx.size());
-      parallel_each(aidx.size(), [&](std::size_t t) {
-        const Eigen::Vector3f& p = aidx.slot_point(t);
-        ax[t] = p.x();
-        ay[t] = p.y();
-        az[t] = p.z();
-      });
       std::vector<double> rho(R, 0.0);
       std::vector<std::uint8_t> low_l(by_l ? R : 0, 0);
       const std::size_t anchors = by_d ? (R + kDisplacementAnchor - 1) / kDisplacementAnchor : 0;
       std::vector<MoveStats> anchor_stats(anchors);
-      const SelectLoops loops = select_loops();  // dispatched once, called per run
-      parallel_each(R, [&](std::size_t s) {
-        thread_local std::vector<float> around_d;
-        const bool anchor = by_d && s % kDisplacementAnchor == 0;
-        // Likelihood ratio: L_s < ratio x Q1, Q1 the element at rank floor(n / 4) of the n
-        // likelihoods around, holds exactly when at most floor(n / 4) of them have ratio x L_q
-        // <= L_s (ratio x L is monotone in L), so a count replaces the selection. No points
-        // around (s is off the thinned subsample, and alone): Q1 would be L_s itself, kept.
-        const double l_s = by_l ? static_cast<double>(lik[s]) : 0.0;
-        // Not an anchor, on the grid's fast path: the same points, counted in one pass.
-        const float r = hs[s];
-        const std::int64_t c = !anchor && r > 0 ? aidx.adjacent_cell(ridx.slot_point(s), r) : -1;
-        float bound = 0;
-        if (c >= 0 && (!by_l || largest_float_scaled_at_or_below(o.likelihood_ratio, l_s, bound))) {
-          const Eigen::Vector3f& q = ridx.slot_point(s);
-          const float qa[3] = {q.x(), q.y(), q.z()};
-          WithinCounts w;
-          aidx.for_each_adjacent_run(
-              static_cast<std::size_t>(c), [&](std::uint32_t b, std::uint32_t e) {
-                loops.count_within(ax.data() + b, ay.data() + b, az.data() + b, around_cnt + b,
-                                   by_l ? around_lik + b : nullptr, e - b, qa, r * r, bound, w);
-              });
-          rho[s] = static_cast<double>(w.sum) * static_cast<double>(stride);
-          if (by_l) low_l[s] = w.n > 0 && w.at_or_below <= w.n / 4 ? 1 : 0;
-          return;
-        }
-        std::uint64_t sum = 0;
-        std::size_t n_l = 0, at_or_below = 0;
-        const auto [hits, na] = around(s);
-        if (anchor) around_d.resize(na);
-        for (std::size_t k = 0; k < na; ++k) {
-          const std::uint32_t a = hits[k];
-          sum += around_cnt[a];
-          if (by_l) {
-            ++n_l;
-            at_or_below += o.likelihood_ratio * static_cast<double>(around_lik[a]) <= l_s ? 1 : 0;
-          }
-          if (anchor) around_d[k] = around_moved[a];
-        }
-        rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
-        if (by_l) low_l[s] = n_l > 0 && at_or_below <= n_l / 4 ? 1 : 0;
-        if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats(around_d, s);
+      parallel_each(ridx.cell_count(), [&](std::size_t c) {
+        for_cell(
+            c, [](std::size_t) { return true; },
+            [&](std::size_t s, const NearPoints& near) {
+              const bool anchor = by_d && s % kDisplacementAnchor == 0;
+              // Likelihood ratio: L_s < ratio x Q1, Q1 the element at rank floor(n / 4) of the
+              // n likelihoods around, holds exactly when at most floor(n / 4) of them have
+              // ratio x L_q <= L_s (ratio x L is monotone in L), so a count replaces the
+              // selection. No points around (s is off the thinned subsample, and alone): Q1
+              // would be L_s itself, kept.
+              const double l_s = by_l ? static_cast<double>(lik[s]) : 0.0;
+              float bound = 0;
+              if (!anchor &&
+                  (!by_l || largest_float_scaled_at_or_below(o.likelihood_ratio, l_s, bound))) {
+                // Not an anchor: counted in one pass.
+                const Eigen::Vector3f& q = ridx.slot_point(s);
+                const float qa[3] = {q.x(), q.y(), q.z()};
+                WithinCounts w;
+                loops.count_within(near.x.data(), near.y.data(), near.z.data(), near.cnt.data(),
+                                   by_l ? near.lik.data() : nullptr, near.n, qa, hs[s] * hs[s],
+                                   bound, w);
+                rho[s] = static_cast<double>(w.sum) * static_cast<double>(stride);
+                if (by_l) low_l[s] = w.n > 0 && w.at_or_below <= w.n / 4 ? 1 : 0;
+                return;
+              }
+              thread_local std::vector<std::uint32_t> hits;
+              const std::size_t na = around(s, near, hits);
+              std::uint64_t sum = 0;
+              std::size_t at_or_below = 0;
+              for (std::size_t k = 0; k < na; ++k) {
+                const std::uint32_t a = hits[k];
+                sum += around_cnt[a];
+                if (by_l)
+                  at_or_below +=
+                      o.likelihood_ratio * static_cast<double>(around_lik[a]) <= l_s ? 1 : 0;
+              }
+              rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
+              if (by_l) low_l[s] = na > 0 && at_or_below <= na / 4 ? 1 : 0;
+              if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats_at(s, near);
+            });
       });
       // Screen: a point whose move lies within half the threshold of the median of an anchor
       // around it within h (2 robust deviations at the default 4; the four anchors nearest in
@@ -219,8 +336,8 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
       // screen saves time (the statistics change slowly over h): at 1M points 5 % of them were
       // left to requery with the two nearest anchors, and against the test at every point it
       // kept 1 of the 4,792 points the latter dropped on the real bunny scans (6 with four).
-      std::vector<std::uint8_t> displaced(by_d ? R : 0, 0);
-      if (by_d)
+      std::vector<std::uint8_t> displaced(by_d ? R : 0, 0), requery(by_d ? R : 0, 0);
+      if (by_d) {
         parallel_each(R, [&](std::size_t s) {
           if (s % kDisplacementAnchor == 0) {
             displaced[s] = is_displaced(s, anchor_stats[s / kDisplacementAnchor]) ? 1 : 0;
@@ -240,12 +357,17 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
                     0.5 * o.displacement_sigma * static_cast<double>(m.scale))
               return;
           }
-          thread_local std::vector<float> around_d;
-          const auto [hits, na] = around(s);
-          around_d.resize(na);
-          for (std::size_t k = 0; k < na; ++k) around_d[k] = around_moved[hits[k]];
-          displaced[s] = is_displaced(s, move_stats(around_d, s)) ? 1 : 0;
+          requery[s] = 1;
         });
+        // The points the screen left, cell by cell.
+        parallel_each(ridx.cell_count(), [&](std::size_t c) {
+          for_cell(
+              c, [&](std::size_t s) { return requery[s] != 0; },
+              [&](std::size_t s, const NearPoints& near) {
+                displaced[s] = is_displaced(s, move_stats_at(s, near)) ? 1 : 0;
+              });
+        });
+      }
       const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
       for (std::size_t s = 0; s < R; ++s) {
         if (rho[s] < threshold)

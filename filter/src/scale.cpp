@@ -7,6 +7,7 @@
 #include <sstream>
 #include <utility>
 
+#include "cell_groups.h"
 #include "kernel_fit.h"
 #include "noise_scale.h"
 #include "parallel.h"
@@ -130,7 +131,6 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       const detail::SelectLoops loops = detail::select_loops();  // dispatched once, called per run
       parallel_each_reporting(sr.index->cell_count(), o, "scale", [&](std::size_t c) {
         thread_local std::vector<float> bx, by, bz, hit, band, cx, cy, cz;
-        thread_local std::vector<std::uint8_t> octant;
         struct Run {
           std::size_t b, e;
           Eigen::Vector3f lo, hi;  // bounding box of the run's points
@@ -246,29 +246,17 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
         float guess = 0;  // the last distance found in this cell, 0 before the first
         kth_at(cb, guess, nullptr, nullptr, nullptr, 0, 0);
         if (ce - cb == 1) return;
-        Eigen::Vector3f lo_c = sr.index->slot_point(cb), hi_c = lo_c;
-        for (std::uint32_t s = cb + 1; s < ce; ++s) {
-          lo_c = lo_c.cwiseMin(sr.index->slot_point(s));
-          hi_c = hi_c.cwiseMax(sr.index->slot_point(s));
-        }
-        const Eigen::Vector3f mid = 0.5f * (lo_c + hi_c);
-        octant.resize(ce - cb);
-        for (std::uint32_t s = cb + 1; s < ce; ++s) {
-          const Eigen::Vector3f& p = sr.index->slot_point(s);
-          octant[s - cb] = static_cast<std::uint8_t>(
-              (p.x() >= mid.x() ? 1 : 0) | (p.y() >= mid.y() ? 2 : 0) | (p.z() >= mid.z() ? 4 : 0));
-        }
+        thread_local OctantGroups groups;
+        group_by_octant(
+            ce - cb - 1,
+            [&](std::size_t k) -> const Eigen::Vector3f& {
+              return sr.index->slot_point(cb + 1 + static_cast<std::uint32_t>(k));
+            },
+            groups);
         for (std::uint8_t g = 0; g < 8; ++g) {
-          Eigen::Vector3f glo = Eigen::Vector3f::Constant(std::numeric_limits<float>::max());
-          Eigen::Vector3f ghi = -glo;
-          std::size_t members = 0;
-          for (std::uint32_t s = cb + 1; s < ce; ++s)
-            if (octant[s - cb] == g) {
-              glo = glo.cwiseMin(sr.index->slot_point(s));
-              ghi = ghi.cwiseMax(sr.index->slot_point(s));
-              ++members;
-            }
-          if (members == 0) continue;
+          if (groups.members[g] == 0) continue;
+          const Eigen::Vector3f& glo = groups.lo[g];
+          const Eigen::Vector3f& ghi = groups.hi[g];
           const float within = std::min(guess * kGroupReach, reach);
           // A point's rounded squared distance to the box is at most its rounded squared
           // distance to any query in it (float rounding is monotone): the points below `within`
@@ -284,7 +272,8 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
                                     {cx.data(), cy.data(), cz.data()}, nc);
           }
           for (std::uint32_t s = cb + 1; s < ce; ++s)
-            if (octant[s - cb] == g) kth_at(s, guess, cx.data(), cy.data(), cz.data(), nc, within);
+            if (groups.octant[s - cb - 1] == g)
+              kth_at(s, guess, cx.data(), cy.data(), cz.data(), nc, within);
         }
       });
       in.hi = std::move(hi);
