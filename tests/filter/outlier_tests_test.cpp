@@ -10,6 +10,7 @@
 #include <numeric>
 #include <random>
 
+#include "../../filter/src/neighbor_index.h"
 #include "../../filter/src/parallel.h"
 
 namespace scanclean::detail {
@@ -147,6 +148,118 @@ TEST(OutlierTestsTest, SmallComponentsMatchUnionFindOverAllPairs) {
     removed += got[a] != Removal::kKept;
   }
   EXPECT_GE(removed, 5u);  // at least the far clump
+}
+
+// All three tests at once with a kernel stride and a scale per point, some past the grid's cell
+// (h_i up to 1.7 h, the cell h: those take the index's own query), against the rules written
+// out over all pairs in the representatives' grid order: the sums run over every stride-th
+// slot; the displacement test's statistics come from every 8th slot (the anchors), and a point
+// whose move lies within half the threshold of the median of one of the four anchors nearest in
+// that order, within its h, is kept without statistics of its own.
+TEST(OutlierTestsTest, AllTestsMatchTheirRulesWithAStrideAndAScalePerPoint) {
+  const double h = 0.01;
+  for (std::size_t stride : {1u, 2u, 3u}) {
+    Scene s = make_scene(11 + static_cast<std::uint32_t>(stride), h);
+    const std::size_t n = s.x.size();
+    std::mt19937 rng(20 + static_cast<std::uint32_t>(stride));
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    std::normal_distribution<double> g(0.0, 0.001);
+    s.d.hi.resize(n);
+    std::vector<Eigen::Vector3d> start(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      s.d.hi[i] = static_cast<float>(h) * (i % 20 == 0 ? 1.7f : 0.6f + 0.4f * u(rng));
+      const double move = i % 37 == 0 ? 0.02 : g(rng);  // a few points moved far
+      start[i] = s.x[i] - Eigen::Vector3d(0, 0, move);
+    }
+    RepresentativeTestInput in = input_of(s, h);
+    in.input_positions = &start;
+    in.stride = stride;
+    FilterOptions o = only(0.3, 0.25, false);
+    o.displacement_sigma = 4;
+    const std::vector<Removal> got = test_representatives(in, o);
+
+    // The oracle, in the slots of the same grid.
+    std::vector<Eigen::Vector3f> pf(n);
+    for (std::size_t i = 0; i < n; ++i) pf[i] = s.x[i].cast<float>();
+    const NeighborIndex ridx(pf, h * 1.001);
+    const std::vector<std::uint32_t>& ord = ridx.order();
+    std::vector<float> hs(n), moved(n), lik(n);
+    std::vector<double> cnt(n);
+    for (std::size_t t = 0; t < n; ++t) {
+      const std::uint32_t i = ord[t];
+      hs[t] = s.d.hi[i];
+      moved[t] = static_cast<float>((s.x[i] - start[i]).dot(Eigen::Vector3d(0, 0, 1)));
+      lik[t] = s.pr.L[i];
+      cnt[t] = s.cl.count[i];
+    }
+    auto around = [&](std::size_t t) {
+      std::vector<std::size_t> a;
+      for (std::size_t q = 0; q < n; q += stride) {
+        const Eigen::Vector3f d = ridx.slot_point(q) - ridx.slot_point(t);
+        if ((d.x() * d.x() + d.y() * d.y()) + d.z() * d.z() < hs[t] * hs[t]) a.push_back(q);
+      }
+      return a;
+    };
+    struct Stats {
+      float median = 0, scale = 0;
+    };
+    auto stats = [&](std::size_t t) {
+      std::vector<float> v;
+      for (std::size_t q : around(t)) v.push_back(moved[q]);
+      Stats m;
+      if (v.size() < 8) return m;
+      std::sort(v.begin(), v.end());
+      m.median = v[v.size() / 2];
+      for (float& e : v) e = std::abs(e - m.median);
+      std::sort(v.begin(), v.end());
+      m.scale = std::max(1.4826f * v[v.size() / 2], 0.02f * hs[t]);
+      return m;
+    };
+    auto displaced_by = [&](std::size_t t, const Stats& m) {
+      return m.scale > 0 && static_cast<double>(std::abs(moved[t] - m.median)) >
+                                4.0 * static_cast<double>(m.scale);
+    };
+    std::vector<Stats> anchor((n + 7) / 8);
+    for (std::size_t a = 0; a < anchor.size(); ++a) anchor[a] = stats(8 * a);
+    std::vector<double> rho(n);
+    std::vector<bool> low_l(n), displaced(n);
+    for (std::size_t t = 0; t < n; ++t) {
+      std::size_t at_or_below = 0;
+      const std::vector<std::size_t> a = around(t);
+      for (std::size_t q : a) {
+        rho[t] += cnt[q] * static_cast<double>(stride);
+        at_or_below += 0.25 * static_cast<double>(lik[q]) <= static_cast<double>(lik[t]) ? 1 : 0;
+      }
+      low_l[t] = !a.empty() && at_or_below <= a.size() / 4;
+      if (t % 8 == 0) {
+        displaced[t] = displaced_by(t, anchor[t / 8]);
+        continue;
+      }
+      bool screened = false;
+      for (std::size_t k = t / 8 > 0 ? t / 8 - 1 : 0; k <= t / 8 + 2 && k < anchor.size(); ++k) {
+        const float d2 = (ridx.slot_point(t) - ridx.slot_point(8 * k)).squaredNorm();
+        screened = screened || (anchor[k].scale > 0 && d2 <= hs[t] * hs[t] &&
+                                static_cast<double>(std::abs(moved[t] - anchor[k].median)) <=
+                                    0.5 * 4.0 * static_cast<double>(anchor[k].scale));
+      }
+      displaced[t] = !screened && displaced_by(t, stats(t));
+    }
+    const double limit = 0.3 * median_of(rho);
+    std::size_t counts[4] = {0, 0, 0, 0};
+    for (std::size_t t = 0; t < n; ++t) {
+      const Removal want = rho[t] < limit ? Removal::kLowDensity
+                           : low_l[t]     ? Removal::kLowLikelihood
+                           : displaced[t] ? Removal::kDisplaced
+                                          : Removal::kKept;
+      EXPECT_EQ(got[ord[t]], want) << "stride " << stride << ", slot " << t;
+      ++counts[static_cast<int>(want)];
+    }
+    // Every test removed something, and most points stay.
+    EXPECT_GT(counts[1], 0u) << stride;
+    EXPECT_GT(counts[2], 0u) << stride;
+    EXPECT_GT(counts[3], 0u) << stride;
+    EXPECT_GT(counts[0], n * 3 / 4) << stride;
+  }
 }
 
 TEST(OutlierTestsTest, SparseSupportUsesTheMedianOverKernels) {
