@@ -1,8 +1,10 @@
 #include "clustering.h"
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -12,50 +14,6 @@
 #include "radix_sort.h"
 
 namespace scanclean::detail {
-namespace {
-
-// Open-addressing map from a 63-bit cell key to a value (built sequentially, then read).
-class CellMap {
- public:
-  explicit CellMap(std::size_t expected) {
-    std::size_t cap = 16;
-    while (cap < 2 * expected) cap *= 2;
-    mask_ = cap - 1;
-    keys_.assign(cap, kEmpty);
-    vals_.assign(cap, 0);
-  }
-  // Value slot for key, inserting `init` if absent.
-  std::uint32_t& at(std::uint64_t key, std::uint32_t init) {
-    std::uint64_t h = (key * 0x9E3779B97F4A7C15ULL) >> 17;
-    while (true) {
-      const std::uint64_t s = h & mask_;
-      if (keys_[s] == key) return vals_[s];
-      if (keys_[s] == kEmpty) {
-        keys_[s] = key;
-        vals_[s] = init;
-        return vals_[s];
-      }
-      ++h;
-    }
-  }
-  const std::uint32_t* find(std::uint64_t key) const {
-    std::uint64_t h = (key * 0x9E3779B97F4A7C15ULL) >> 17;
-    while (true) {
-      const std::uint64_t s = h & mask_;
-      if (keys_[s] == key) return &vals_[s];
-      if (keys_[s] == kEmpty) return nullptr;
-      ++h;
-    }
-  }
-
- private:
-  static constexpr std::uint64_t kEmpty = ~0ULL;
-  std::vector<std::uint64_t> keys_;
-  std::vector<std::uint32_t> vals_;
-  std::uint64_t mask_ = 0;
-};
-
-}  // namespace
 
 Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& pr, double eps,
                         bool oriented) {
@@ -130,100 +88,138 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   parallel_each(nc, [&](std::size_t k) {
     joins[k] = pr.state[cand[k]] != ProjectionState::kNotConverged ? 1 : 0;
   });
-  // Grid of the candidates that join: (cell key, rank) sorted, their positions and normals
-  // copied into that order, and a map from each occupied cell's key to its run.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell(nc);
-  parallel_each(nc, [&](std::size_t k) {
-    const Eigen::Vector3d& p = x[cand[k]];
-    by_cell[k] = {cell_key(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)),
-                  static_cast<std::uint32_t>(k)};
+  // Grid of the candidates that join: (cell, point index) sorted, their positions, normals and
+  // ranks copied into that order. The cell is a dense number, x + nx (y + ny z), so that the
+  // cells of one row along x are consecutive in that order. Built in point order (the filter's
+  // grid order, so the positions are read in sequence).
+  std::vector<std::uint32_t> rank_of(n, kNone);
+  parallel_each(nc, [&](std::size_t k) { rank_of[cand[k]] = static_cast<std::uint32_t>(k); });
+  std::vector<std::uint32_t> joiners;  // point indices, in point order
+  for (std::size_t i = 0; i < n; ++i)
+    if (rank_of[i] != kNone && joins[rank_of[i]]) joiners.push_back(static_cast<std::uint32_t>(i));
+  const std::size_t nj = joiners.size();
+  // Every cell coordinate lies in [0, top] (coord is monotone; lo is a cell below the box).
+  std::int32_t top[3] = {0, 0, 0};
+  if (!cand.empty())
+    for (int a = 0; a < 3; ++a) top[a] = coord(hi[a], a);
+  const std::uint64_t nx = static_cast<std::uint64_t>(top[0]) + 1,
+                      nxy = nx * (static_cast<std::uint64_t>(top[1]) + 1);
+  auto dense = [&](std::int32_t cx, std::int32_t cy, std::int32_t cz) {
+    return static_cast<std::uint64_t>(cx) + nx * static_cast<std::uint64_t>(cy) +
+           nxy * static_cast<std::uint64_t>(cz);
+  };
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell(nj);  // (cell, point)
+  parallel_each(nj, [&](std::size_t j) {
+    const Eigen::Vector3d& p = x[joiners[j]];
+    by_cell[j] = {dense(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)), joiners[j]};
   });
+  std::vector<std::uint32_t>().swap(joiners);
   {
-    std::size_t m = 0;  // the joining ones, in rank order
-    for (std::size_t k = 0; k < nc; ++k)
-      if (joins[k]) by_cell[m++] = by_cell[k];
-    by_cell.resize(m);
-  }
-  if (!by_cell.empty()) {
-    // By cell key, then rank (by_cell is in rank order and the sort stable). The sort key
-    // packs the cell's (z, y, x) densely, in the order of cell_key, so that it has fewer bits.
-    std::uint64_t top[3] = {0, 0, 0};
-    constexpr std::uint64_t kMask = (1u << 21) - 1;
-    for (const auto& e : by_cell)
-      for (int a = 0; a < 3; ++a) top[a] = std::max(top[a], (e.first >> (21 * a)) & kMask);
-    const std::uint64_t nx = top[0] + 1, nxy = nx * (top[1] + 1);
     std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch;
     stable_radix_sort(
-        by_cell,
-        [&](const auto& e) {
-          return (e.first & kMask) + nx * ((e.first >> 21) & kMask) + nxy * (e.first >> 42);
-        },
-        scratch);
+        by_cell, [](const auto& e) { return e.first; }, scratch);
   }
-  const std::size_t nj = by_cell.size();
   std::vector<Eigen::Vector3d> cell_x(nj);
   std::vector<Eigen::Vector3f> cell_n(oriented ? nj : 0);
-  std::vector<std::uint8_t> run_start(nj);
+  std::vector<std::uint32_t> cell_rank(nj);
   parallel_each(nj, [&](std::size_t j) {
-    const std::uint32_t i = cand[by_cell[j].second];
+    const std::uint32_t i = by_cell[j].second;
     cell_x[j] = x[i];
     if (oriented) cell_n[j] = pr.normal[i];
-    run_start[j] = j == 0 || by_cell[j - 1].first != by_cell[j].first ? 1 : 0;
+    cell_rank[j] = rank_of[i];
   });
-  std::size_t runs = 0;
-  for (std::uint8_t r : run_start) runs += r;
-  CellMap map(runs);
-  for (std::size_t j = 0; j < nj; ++j)
-    if (run_start[j]) map.at(by_cell[j].first, 0) = static_cast<std::uint32_t>(j);
+  std::vector<std::uint32_t>().swap(rank_of);
   const double eps2 = eps * eps;
-  // Earlier neighbours of the joining candidate at by_cell[j] (rank < its rank, within eps,
-  // normals agreeing), with their squared distances, in compressed rows (counted, then filled).
-  auto for_each_earlier = [&](std::size_t j0, auto&& f) {
-    const std::uint32_t k = by_cell[j0].second;
-    const Eigen::Vector3d& p = cell_x[j0];
-    std::int32_t a0[3], a1[3];
-    for (int a = 0; a < 3; ++a) {
-      a0[a] = coord(p[a] - eps, a);
-      a1[a] = coord(p[a] + eps, a);
-    }
-    for (std::int32_t cz = a0[2]; cz <= a1[2]; ++cz)
-      for (std::int32_t cy = a0[1]; cy <= a1[1]; ++cy)
-        for (std::int32_t cx = a0[0]; cx <= a1[0]; ++cx) {
-          const std::uint64_t key = cell_key(cx, cy, cz);
-          const std::uint32_t* start = map.find(key);
-          if (!start) continue;
-          for (std::size_t j = *start; j < nj && by_cell[j].first == key; ++j) {
-            const std::uint32_t q = by_cell[j].second;
-            if (q >= k) continue;
-            const double d2 = (cell_x[j] - p).squaredNorm();
-            if (!(d2 < eps2)) continue;
-            if (oriented && !(cell_n[j].dot(cell_n[j0]) > 0)) continue;
-            f(q, d2);
-          }
+  // Visits the joining candidates by_cell[j], j in [j0, j1), in order, calling
+  // f(j, for_each_earlier) with for_each_earlier(g) calling g(q, d2) for the earlier neighbours
+  // of j (rank q < its rank, within eps, normals agreeing). The query box [p - eps, p + eps]
+  // meets at most two cells per axis (cells of 6 eps) and so up to four rows of cells along x;
+  // each of the nine rows around j's cell has a cursor at the first entry of the cell before
+  // j's, which only moves forward as j does (a galloping search), so no cell is looked up.
+  auto sweep = [&](std::size_t j0, std::size_t j1, auto&& f) {
+    std::array<std::size_t, 9> cursor;
+    cursor.fill(j0);
+    std::array<bool, 9> placed{};
+    auto seek = [&](std::size_t r, std::uint64_t target) {
+      std::size_t c = cursor[r];
+      if (!placed[r]) {  // first use in this range: from the start
+        c = static_cast<std::size_t>(
+            std::lower_bound(by_cell.begin(), by_cell.end(), target,
+                             [](const auto& e, std::uint64_t t) { return e.first < t; }) -
+            by_cell.begin());
+        placed[r] = true;
+      } else if (c < nj && by_cell[c].first < target) {
+        std::size_t step = 1, lo_c = c;
+        while (c + step < nj && by_cell[c + step].first < target) {
+          lo_c = c + step;
+          step *= 2;
         }
+        c = static_cast<std::size_t>(
+            std::lower_bound(by_cell.begin() + static_cast<std::ptrdiff_t>(lo_c),
+                             by_cell.begin() + static_cast<std::ptrdiff_t>(std::min(c + step, nj)),
+                             target, [](const auto& e, std::uint64_t t) { return e.first < t; }) -
+            by_cell.begin());
+      }
+      cursor[r] = c;
+      return c;
+    };
+    for (std::size_t j = j0; j < j1; ++j) {
+      const Eigen::Vector3d& p = cell_x[j];
+      const std::uint32_t k = cell_rank[j];
+      std::int32_t c3[3], a0[3], a1[3];
+      for (int a = 0; a < 3; ++a) {
+        c3[a] = coord(p[a], a);
+        a0[a] = coord(p[a] - eps, a);
+        a1[a] = std::min(coord(p[a] + eps, a), top[a]);
+      }
+      auto for_each_earlier = [&](auto&& g) {
+        for (std::int32_t cz = a0[2]; cz <= a1[2]; ++cz)
+          for (std::int32_t cy = a0[1]; cy <= a1[1]; ++cy) {
+            const std::size_t r = static_cast<std::size_t>(3 * (cz - c3[2] + 1) + (cy - c3[1] + 1));
+            const std::uint64_t first = dense(a0[0], cy, cz), last = dense(a1[0], cy, cz);
+            for (std::size_t q = seek(r, dense(c3[0] - 1, cy, cz));
+                 q < nj && by_cell[q].first <= last; ++q) {
+              if (by_cell[q].first < first) continue;
+              const std::uint32_t rq = cell_rank[q];
+              if (rq >= k) continue;
+              const double d2 = (cell_x[q] - p).squaredNorm();
+              if (!(d2 < eps2)) continue;
+              if (oriented && !(cell_n[q].dot(cell_n[j]) > 0)) continue;
+              g(rq, d2);
+            }
+          }
+      };
+      f(j, k, for_each_earlier);
+    }
   };
   // Both passes run in grid order (spatially coherent); the second only over the candidates
   // that have earlier neighbours at all (after the projection, few of them).
   std::vector<std::uint32_t> row(nc + 1, 0);
-  parallel_each(nj, [&](std::size_t j) {
-    const std::uint32_t k = by_cell[j].second;
-    std::uint32_t m = 0;
-    for_each_earlier(j, [&](std::uint32_t, double) { ++m; });
-    row[k + 1] = m;
-  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nj, kGrain),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      sweep(range.begin(), range.end(),
+                            [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
+                              std::uint32_t m = 0;
+                              for_each_earlier([&](std::uint32_t, double) { ++m; });
+                              row[k + 1] = m;
+                            });
+                    });
   for (std::size_t k = 0; k < nc; ++k) row[k + 1] += row[k];
   std::vector<std::uint32_t> nb(row[nc]);
   std::vector<double> nb_d2(row[nc]);
-  parallel_each(nj, [&](std::size_t j) {
-    const std::uint32_t k = by_cell[j].second;
-    std::uint32_t m = row[k];
-    if (m == row[k + 1]) return;
-    for_each_earlier(j, [&](std::uint32_t q, double d2) {
-      nb[m] = q;
-      nb_d2[m] = d2;
-      ++m;
-    });
-  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nj, kGrain),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      sweep(range.begin(), range.end(),
+                            [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
+                              std::uint32_t m = row[k];
+                              if (m == row[k + 1]) return;
+                              for_each_earlier([&](std::uint32_t q, double d2) {
+                                nb[m] = q;
+                                nb_d2[m] = d2;
+                                ++m;
+                              });
+                            });
+                    });
   // Rounds: a candidate with an earlier representative among its neighbours is a member; one
   // whose earlier neighbours are all members is a representative.
   enum : std::uint8_t { kUndecided, kRep, kMember };
@@ -294,7 +290,6 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   }
   cl.count.resize(R);
   cl.position.resize(R);
-  std::vector<double> lsum(R);
   parallel_each(R, [&](std::size_t r) {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     double l = 0;
@@ -309,11 +304,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
       cl.rep_of[i] = static_cast<std::uint32_t>(r);
     }
     cl.count[r] = first[r + 1] - first[r];
-    cl.position[r] = sum;
-    lsum[r] = l;
+    cl.position[r] = l > 0 ? Eigen::Vector3d(sum / l) : x[cl.seed[r]];
   });
-  for (std::size_t r = 0; r < cl.seed.size(); ++r)
-    cl.position[r] = lsum[r] > 0 ? Eigen::Vector3d(cl.position[r] / lsum[r]) : x[cl.seed[r]];
   return cl;
 }
 
