@@ -9,7 +9,6 @@
 #include <limits>
 #include <utility>
 
-#include "neighbor_index.h"
 #include "parallel.h"
 #include "radix_sort.h"
 
