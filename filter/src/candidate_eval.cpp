@@ -1,5 +1,6 @@
 #include "candidate_eval.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -28,7 +29,18 @@ using B = CandidateBuffer;
 
 constexpr float kLog2e = 1.44269504088896341f;
 
-HWY_INLINE V field(D d, const CandidateBuffer& b, std::size_t f, std::size_t j) {
+// The loops without sums (e_j, d_j and their minimum) take whole AVX-512 vectors (16 floats)
+// where the processor has them, then one of 8 lanes for a last 8 (the padding is a multiple of
+// 8): the same values in every lane. The sums stay in 8 lanes, in the same order on every
+// target that has 8.
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
+using DL = hn::ScalableTag<float>;
+#else
+using DL = D;
+#endif
+
+template <class DV>
+HWY_INLINE hn::Vec<DV> field(DV d, const CandidateBuffer& b, std::size_t f, std::size_t j) {
   return hn::LoadU(d, b.f[f].data() + j);
 }
 
@@ -54,22 +66,56 @@ HWY_INLINE V vexp(D d, V a) {
 
 // The Mahalanobis e_j = x^T S_j^-1 x and the signed distance d_j = n_j . x of the candidates
 // [j, j + N) at the point (xs, ys, zs), x taken relative to their centres.
-HWY_INLINE void e_and_d(D d, const CandidateBuffer& b, std::size_t j, V xs, V ys, V zs, V& e,
-                        V& dist) {
-  const V dx = hn::Sub(xs, field(d, b, B::kCx, j));
-  const V dy = hn::Sub(ys, field(d, b, B::kCy, j));
-  const V dz = hn::Sub(zs, field(d, b, B::kCz, j));
+template <class DV, class VV = hn::Vec<DV>>
+HWY_INLINE void e_and_d(DV d, const CandidateBuffer& b, std::size_t j, VV xs, VV ys, VV zs, VV& e,
+                        VV& dist) {
+  const VV dx = hn::Sub(xs, field(d, b, B::kCx, j));
+  const VV dy = hn::Sub(ys, field(d, b, B::kCy, j));
+  const VV dz = hn::Sub(zs, field(d, b, B::kCz, j));
   // The multiply-adds are explicit (the file is compiled without contraction): fused where the
   // target has FMA, rounded twice where it has not.
-  const V diag = hn::MulAdd(hn::Mul(field(d, b, B::kQ22, j), dz), dz,
-                            hn::MulAdd(hn::Mul(field(d, b, B::kQ11, j), dy), dy,
-                                       hn::Mul(hn::Mul(field(d, b, B::kQ00, j), dx), dx)));
-  const V off = hn::MulAdd(hn::Mul(field(d, b, B::kQ12, j), dy), dz,
-                           hn::MulAdd(hn::Mul(field(d, b, B::kQ02, j), dx), dz,
-                                      hn::Mul(hn::Mul(field(d, b, B::kQ01, j), dx), dy)));
+  const VV diag = hn::MulAdd(hn::Mul(field(d, b, B::kQ22, j), dz), dz,
+                             hn::MulAdd(hn::Mul(field(d, b, B::kQ11, j), dy), dy,
+                                        hn::Mul(hn::Mul(field(d, b, B::kQ00, j), dx), dx)));
+  const VV off = hn::MulAdd(hn::Mul(field(d, b, B::kQ12, j), dy), dz,
+                            hn::MulAdd(hn::Mul(field(d, b, B::kQ02, j), dx), dz,
+                                       hn::Mul(hn::Mul(field(d, b, B::kQ01, j), dx), dy)));
   e = hn::Add(diag, off);
   dist = hn::MulAdd(dz, field(d, b, B::kNz, j),
                     hn::MulAdd(dy, field(d, b, B::kNy, j), hn::Mul(dx, field(d, b, B::kNx, j))));
+}
+
+// Candidates [j, e) in whole vectors of dv: e_j kept where below t2 and within the slab (else
+// +inf) and d_j stored; returns the smallest kept e_j (+inf if none).
+template <class DV>
+HWY_INLINE float store_e_and_d(DV d, CandidateBuffer& b, std::size_t j, std::size_t e,
+                               const float* x, float t2) {
+  const std::size_t N = hn::Lanes(d);
+  const auto inf = hn::Set(d, std::numeric_limits<float>::infinity());
+  const auto vt2 = hn::Set(d, t2);
+  const auto xs = hn::Set(d, x[0]), ys = hn::Set(d, x[1]), zs = hn::Set(d, x[2]);
+  float* e_out = b.f[B::kE].data();
+  float* d_out = b.d.data();
+  auto vmin = inf;
+  for (; j < e; j += N) {
+    hn::Vec<DV> ej, dist;
+    e_and_d(d, b, j, xs, ys, zs, ej, dist);
+    const auto keep =
+        hn::And(hn::Lt(ej, vt2), hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j)));
+    const auto em = hn::IfThenElse(keep, ej, inf);
+    vmin = hn::Min(vmin, em);
+    hn::StoreU(em, d, e_out + j);
+    hn::StoreU(dist, d, d_out + j);
+  }
+  return hn::GetLane(hn::MinOfLanes(d, vmin));
+}
+
+// The padded candidates in whole vectors of DL, then of D for a last 8.
+HWY_INLINE float store_e_and_d(CandidateBuffer& b, const float* x, float t2) {
+  const DL dl;
+  const std::size_t wide = b.padded / hn::Lanes(dl) * hn::Lanes(dl);
+  const float a = store_e_and_d(dl, b, 0, wide, x, t2);
+  return std::min(a, store_e_and_d(D(), b, wide, b.padded, x, t2));
 }
 
 // The lanes of v summed in double, in lane order.
@@ -101,20 +147,8 @@ HWY_INLINE bool step_impl(CandidateBuffer& b, const float* x, const float* nref,
       vmin = hn::Min(vmin, em);
       hn::StoreU(em, d, e_out + j);
     }
-  } else {
-    const V xs = hn::Set(d, x[0]), ys = hn::Set(d, x[1]), zs = hn::Set(d, x[2]);
-    for (std::size_t j = 0; j < n; j += N) {
-      V e, dist;
-      e_and_d(d, b, j, xs, ys, zs, e, dist);
-      const auto keep =
-          hn::And(hn::Lt(e, vt2), hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j)));
-      const V em = hn::IfThenElse(keep, e, inf);
-      vmin = hn::Min(vmin, em);
-      hn::StoreU(em, d, e_out + j);
-      hn::StoreU(dist, d, d_out + j);
-    }
   }
-  const float emin = hn::GetLane(hn::MinOfLanes(d, vmin));
+  const float emin = kReuse ? hn::GetLane(hn::MinOfLanes(d, vmin)) : store_e_and_d(b, x, t2);
   if (!(emin < std::numeric_limits<float>::infinity())) return false;
   V as = zero, adx = zero, ady = zero, adz = zero, anx = zero, any = zero, anz = zero, al = zero;
   const V emv = hn::Set(d, emin), floor = hn::Set(d, -80.0f), half = hn::Set(d, 0.5f);
@@ -159,23 +193,30 @@ bool StepReuse(CandidateBuffer& b, const float* nref, float t2, StepSums* out) {
   return step_impl<true>(b, nullptr, nref, t2, out);
 }
 
-float MinE(CandidateBuffer& b, const float* x) {
-  const D d;
+// Candidates [j, e) of MinE in whole vectors of dv; returns their smallest slab-masked e_j.
+template <class DV>
+HWY_INLINE float min_e(DV d, CandidateBuffer& b, std::size_t j, std::size_t e, const float* x) {
   const std::size_t N = hn::Lanes(d);
-  const V inf = hn::Set(d, std::numeric_limits<float>::infinity());
-  const V xs = hn::Set(d, x[0]), ys = hn::Set(d, x[1]), zs = hn::Set(d, x[2]);
+  const auto inf = hn::Set(d, std::numeric_limits<float>::infinity());
+  const auto xs = hn::Set(d, x[0]), ys = hn::Set(d, x[1]), zs = hn::Set(d, x[2]);
   float* e_out = b.f[B::kE].data();
   float* d_out = b.d.data();
-  V vmin = inf;
-  for (std::size_t j = 0; j < b.padded; j += N) {
-    V e, dist;
-    e_and_d(d, b, j, xs, ys, zs, e, dist);
-    const V em = hn::IfThenElse(hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j)), e, inf);
+  auto vmin = inf;
+  for (; j < e; j += N) {
+    hn::Vec<DV> ej, dist;
+    e_and_d(d, b, j, xs, ys, zs, ej, dist);
+    const auto em = hn::IfThenElse(hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j)), ej, inf);
     hn::StoreU(em, d, e_out + j);
     hn::StoreU(dist, d, d_out + j);
     vmin = hn::Min(vmin, em);
   }
   return hn::GetLane(hn::MinOfLanes(d, vmin));
+}
+
+float MinE(CandidateBuffer& b, const float* x) {
+  const DL dl;
+  const std::size_t wide = b.padded / hn::Lanes(dl) * hn::Lanes(dl);
+  return std::min(min_e(dl, b, 0, wide, x), min_e(D(), b, wide, b.padded, x));
 }
 
 double Likelihood(CandidateBuffer& b, const float* x, float t2) {

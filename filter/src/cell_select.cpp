@@ -103,7 +103,7 @@ const CellSelect::Entry& CellSelect::part(const NeighborIndex& index, std::uint6
   const float w2 = p.reach * p.reach * 1.001f;
   const float blo[3] = {lo.x(), lo.y(), lo.z()}, bhi[3] = {hi.x(), hi.y(), hi.z()};
   // The arrays only grow (no clearing): n says how much of them is the part.
-  const std::size_t cap = e.n + 8;
+  const std::size_t cap = e.n + kStoreSlack;
   if (p.x.size() < cap) {
     p.x.resize(cap);
     p.y.resize(cap);

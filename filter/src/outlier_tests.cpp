@@ -25,9 +25,9 @@ struct NearPoints {
   std::size_t n = 0;
   // Room for m points and the padding or a whole vector past them.
   void reserve(std::size_t m) {
-    if (x.size() >= m + 16) return;
-    for (auto* v : {&x, &y, &z, &lik}) v->resize(2 * m + 16);
-    for (auto* v : {&at, &cnt}) v->resize(2 * m + 16);
+    if (x.size() >= m + kStoreSlack) return;
+    for (auto* v : {&x, &y, &z, &lik}) v->resize(2 * m + kStoreSlack);
+    for (auto* v : {&at, &cnt}) v->resize(2 * m + kStoreSlack);
   }
   void clear() { n = 0; }
   void push(float px, float py, float pz, std::uint32_t t, std::uint32_t c, float l) {

@@ -140,8 +140,9 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
         // nb says how much of them this cell uses.
         std::size_t nb = 0;
         sr.index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) { nb += e - b; });
-        if (bx.size() < nb + 8)
-          for (auto* v : {&bx, &by, &bz, &hit, &band, &cx, &cy, &cz}) v->resize(2 * nb + 8);
+        if (bx.size() < nb + kStoreSlack)
+          for (auto* v : {&bx, &by, &bz, &hit, &band, &cx, &cy, &cz})
+            v->resize(2 * nb + kStoreSlack);
         runs.clear();
         std::size_t k = 0;
         sr.index->for_each_adjacent_run(c, [&](std::uint32_t b, std::uint32_t e) {

@@ -48,6 +48,16 @@ using D = hn::CappedTag<float, 8>;
 using DU = hn::RebindToUnsigned<D>;
 using V = hn::Vec<D>;
 using M = hn::Mask<D>;
+// The loops that read their tails through masked loads (Band, Within, NearBox) need no padding
+// and take whole AVX-512 vectors (16 floats) where the processor has them.
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
+using DL = hn::ScalableTag<float>;
+#else
+using DL = D;
+#endif
+using DLU = hn::RebindToUnsigned<DL>;
+using VL = hn::Vec<DL>;
+using ML = hn::Mask<DL>;
 
 // The lanes [j, j + N) of p, of which those of `in` (the first n - j) are read; the others are
 // zero. x86's AVX2 and AVX-512 load the lanes of a mask alone; on the other targets a masked
@@ -91,22 +101,23 @@ HWY_INLINE std::size_t compress_store(hn::Vec<DV> v, hn::Mask<DV> keep, DV dv, h
 }
 
 // |p - q|^2 rounded as (dx dx + dy dy) + dz dz.
-HWY_INLINE V squared_distance(V px, V py, V pz, V qx, V qy, V qz) {
-  const V dx = hn::Sub(px, qx), dy = hn::Sub(py, qy), dz = hn::Sub(pz, qz);
+template <class VV>
+HWY_INLINE VV squared_distance(VV px, VV py, VV pz, VV qx, VV qy, VV qz) {
+  const VV dx = hn::Sub(px, qx), dy = hn::Sub(py, qy), dz = hn::Sub(pz, qz);
   return hn::Add(hn::Add(hn::Mul(dx, dx), hn::Mul(dy, dy)), hn::Mul(dz, dz));
 }
 
 // The value of rank k among v[0, n) by counting, for each value, those below it and at or below
 // it; false when no value has rank k (a NaN among them: comparisons with it are all false).
 bool RankSelect(const float* v, std::size_t n, std::size_t k, float* out) {
-  const D d;
+  const DL d;
   const std::size_t N = hn::Lanes(d);
   for (std::size_t i = 0; i < n; ++i) {
-    const V x = hn::Set(d, v[i]);
+    const VL x = hn::Set(d, v[i]);
     std::size_t lt = 0, le = 0;
     for (std::size_t j = 0; j < n; j += N) {
-      const M in = hn::FirstN(d, n - j);
-      const V y = load(d, v + j, n - j >= N, in);
+      const ML in = hn::FirstN(d, n - j);
+      const VL y = load(d, v + j, n - j >= N, in);
       lt += hn::CountTrue(d, hn::And(hn::Lt(y, x), in));
       le += hn::CountTrue(d, hn::And(hn::Le(y, x), in));
     }
@@ -120,20 +131,20 @@ bool RankSelect(const float* v, std::size_t n, std::size_t k, float* out) {
 
 void Band(const float* x, const float* y, const float* z, std::size_t n, const float* q, float lo2,
           float hi2, std::size_t* below, float* band, std::size_t* m) {
-  const D d;
+  const DL d;
   const std::size_t N = hn::Lanes(d);
-  const V qx = hn::Set(d, q[0]), qy = hn::Set(d, q[1]), qz = hn::Set(d, q[2]);
-  const V lo = hn::Set(d, lo2), hi = hn::Set(d, hi2);
+  const VL qx = hn::Set(d, q[0]), qy = hn::Set(d, q[1]), qz = hn::Set(d, q[2]);
+  const VL lo = hn::Set(d, lo2), hi = hn::Set(d, hi2);
   std::size_t count = 0, k = *m;
   // The last few points (n not a multiple of N) through masked loads, not a scalar loop:
   // callers pass the runs of a cell's neighbourhood (about 24 points each at 2.1M), so the tails
   // were a large share.
   for (std::size_t j = 0; j < n; j += N) {
     const bool whole = n - j >= N;
-    const M in = hn::FirstN(d, n - j);
-    const V d2 = squared_distance(load(d, x + j, whole, in), load(d, y + j, whole, in),
-                                  load(d, z + j, whole, in), qx, qy, qz);
-    const M under = hn::And(hn::Lt(d2, lo), in);
+    const ML in = hn::FirstN(d, n - j);
+    const VL d2 = squared_distance(load(d, x + j, whole, in), load(d, y + j, whole, in),
+                                   load(d, z + j, whole, in), qx, qy, qz);
+    const ML under = hn::And(hn::Lt(d2, lo), in);
     count += hn::CountTrue(d, under);
     // The band's lanes, compressed to the front; a whole vector may be stored.
     k += compress_store(d2, hn::AndNot(under, hn::And(hn::Lt(d2, hi), in)), d, band + k);
@@ -146,19 +157,19 @@ void Band(const float* x, const float* y, const float* z, std::size_t n, const f
 void Within(const float* x, const float* y, const float* z, const std::uint32_t* cnt,
             const float* lik, std::size_t n, const float* q, float r2, float lik_max,
             WithinCounts* out) {
-  const D d;
-  const DU du;
+  const DL d;
+  const DLU du;
   const std::size_t N = hn::Lanes(d);
-  const V qx = hn::Set(d, q[0]), qy = hn::Set(d, q[1]), qz = hn::Set(d, q[2]);
-  const V rr = hn::Set(d, r2), lm = hn::Set(d, lik_max);
+  const VL qx = hn::Set(d, q[0]), qy = hn::Set(d, q[1]), qz = hn::Set(d, q[2]);
+  const VL rr = hn::Set(d, r2), lm = hn::Set(d, lik_max);
   auto sum = hn::Zero(du);
   std::size_t within = 0, below = 0;
   for (std::size_t j = 0; j < n; j += N) {  // the last few through masked loads, as Band
     const bool whole = n - j >= N;
-    const M valid = hn::FirstN(d, n - j);
-    const V d2 = squared_distance(load(d, x + j, whole, valid), load(d, y + j, whole, valid),
-                                  load(d, z + j, whole, valid), qx, qy, qz);
-    const M in = hn::And(hn::Lt(d2, rr), valid);
+    const ML valid = hn::FirstN(d, n - j);
+    const VL d2 = squared_distance(load(d, x + j, whole, valid), load(d, y + j, whole, valid),
+                                   load(d, z + j, whole, valid), qx, qy, qz);
+    const ML in = hn::And(hn::Lt(d2, rr), valid);
     const auto c = load(du, cnt + j, whole, hn::RebindMask(du, valid));
     sum = hn::Add(sum, hn::IfThenElseZero(hn::RebindMask(du, in), c));
     within += hn::CountTrue(d, in);
@@ -174,26 +185,26 @@ void Within(const float* x, const float* y, const float* z, const std::uint32_t*
 void NearBox(const float* x, const float* y, const float* z, const std::uint32_t* slot,
              const float* extra, std::size_t n, const float* lo, const float* hi, float r2,
              NearBoxOut* out, std::size_t* m) {
-  const D d;
-  const DU du;
+  const DL d;
+  const DLU du;
   const std::size_t N = hn::Lanes(d);
-  const V lx = hn::Set(d, lo[0]), ly = hn::Set(d, lo[1]), lz = hn::Set(d, lo[2]);
-  const V hx = hn::Set(d, hi[0]), hy = hn::Set(d, hi[1]), hz = hn::Set(d, hi[2]);
-  const V rr = hn::Set(d, r2), zero = hn::Zero(d);
+  const VL lx = hn::Set(d, lo[0]), ly = hn::Set(d, lo[1]), lz = hn::Set(d, lo[2]);
+  const VL hx = hn::Set(d, hi[0]), hy = hn::Set(d, hi[1]), hz = hn::Set(d, hi[2]);
+  const VL rr = hn::Set(d, r2), zero = hn::Zero(d);
   std::size_t k = *m;
   // The last few points (n not a multiple of N) through masked loads, which read nothing past
   // the arrays: runs of a cell's neighbourhood are short, and a scalar tail took a fifth of the
   // time.
   for (std::size_t j = 0; j < n; j += N) {
     const bool whole = n - j >= N;
-    const M valid = hn::FirstN(d, n - j);
-    const V px = load(d, x + j, whole, valid), py = load(d, y + j, whole, valid),
-            pz = load(d, z + j, whole, valid);
-    const V ex = hn::Max(hn::Max(hn::Sub(lx, px), hn::Sub(px, hx)), zero);
-    const V ey = hn::Max(hn::Max(hn::Sub(ly, py), hn::Sub(py, hy)), zero);
-    const V ez = hn::Max(hn::Max(hn::Sub(lz, pz), hn::Sub(pz, hz)), zero);
-    const V g2 = hn::Add(hn::Add(hn::Mul(ex, ex), hn::Mul(ey, ey)), hn::Mul(ez, ez));
-    const M keep = hn::And(hn::Lt(g2, rr), valid);
+    const ML valid = hn::FirstN(d, n - j);
+    const VL px = load(d, x + j, whole, valid), py = load(d, y + j, whole, valid),
+             pz = load(d, z + j, whole, valid);
+    const VL ex = hn::Max(hn::Max(hn::Sub(lx, px), hn::Sub(px, hx)), zero);
+    const VL ey = hn::Max(hn::Max(hn::Sub(ly, py), hn::Sub(py, hy)), zero);
+    const VL ez = hn::Max(hn::Max(hn::Sub(lz, pz), hn::Sub(pz, hz)), zero);
+    const VL g2 = hn::Add(hn::Add(hn::Mul(ex, ex), hn::Mul(ey, ey)), hn::Mul(ez, ez));
+    const ML keep = hn::And(hn::Lt(g2, rr), valid);
     if (hn::AllFalse(d, keep)) continue;
     if (slot) {
       compress_store(load(du, slot + j, whole, hn::RebindMask(du, valid)), hn::RebindMask(du, keep),
@@ -207,20 +218,51 @@ void NearBox(const float* x, const float* y, const float* z, const std::uint32_t
   *m = k;
 }
 
-// n a multiple of 8 (padded), so of N: whole vectors only.
+// Points [j, e) of Within8, in whole vectors of dv (e - j a multiple of its lanes); returns
+// the new count m. A whole vector is stored at m <= j (so within n); the count advances by the
+// selected.
+template <class DV>
+HWY_INLINE std::size_t within_from(DV d, const float* x, const float* y, const float* z,
+                                   const std::uint32_t* slots, std::size_t j, std::size_t e,
+                                   const float* origin, float r2, std::uint32_t* out,
+                                   std::size_t m) {
+  const hn::RebindToUnsigned<DV> du;
+  const std::size_t N = hn::Lanes(d);
+  const auto ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
+  const auto rr = hn::Set(d, r2);
+  for (; j < e; j += N) {
+    const auto d2 =
+        squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
+    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, hn::Lt(d2, rr)), du, out + m);
+  }
+  return m;
+}
+
+// n a multiple of 8 (padded): whole vectors of DL, then (with 16 lanes) one of D for the last 8.
 std::size_t Within8(const float* x, const float* y, const float* z, const std::uint32_t* slots,
                     std::size_t n, const float* origin, float r2, std::uint32_t* out) {
-  const D d;
-  const DU du;
+  const DL dl;
+  const std::size_t wide = n / hn::Lanes(dl) * hn::Lanes(dl);
+  const std::size_t m = within_from(dl, x, y, z, slots, 0, wide, origin, r2, out, 0);
+  return within_from(D(), x, y, z, slots, wide, n, origin, r2, out, m);
+}
+
+// As within_from, for Reach8.
+template <class DV>
+HWY_INLINE std::size_t reach_from(DV d, const float* x, const float* y, const float* z,
+                                  const float* sigma, const std::uint32_t* slots, std::size_t j,
+                                  std::size_t e, const float* origin, float r2, float scale,
+                                  float margin, std::uint32_t* out, std::size_t m) {
+  const hn::RebindToUnsigned<DV> du;
   const std::size_t N = hn::Lanes(d);
-  const V ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
-  const V rr = hn::Set(d, r2);
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; j += N) {
-    const V d2 =
+  const auto ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
+  const auto rr = hn::Set(d, r2), sc = hn::Set(d, scale), mg = hn::Set(d, margin);
+  for (; j < e; j += N) {
+    const auto d2 =
         squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
-    // A whole vector is stored at m <= j (so within n); the count advances by the selected.
-    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, hn::Lt(d2, rr)), du, out + m);
+    const auto reach = hn::Add(hn::Mul(sc, hn::LoadU(d, sigma + j)), mg);
+    const auto in = hn::And(hn::Lt(d2, rr), hn::Lt(d2, hn::Mul(reach, reach)));
+    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, in), du, out + m);
   }
   return m;
 }
@@ -228,20 +270,11 @@ std::size_t Within8(const float* x, const float* y, const float* z, const std::u
 std::size_t Reach8(const float* x, const float* y, const float* z, const float* sigma,
                    const std::uint32_t* slots, std::size_t n, const float* origin, float r2,
                    float scale, float margin, std::uint32_t* out) {
-  const D d;
-  const DU du;
-  const std::size_t N = hn::Lanes(d);
-  const V ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
-  const V rr = hn::Set(d, r2), sc = hn::Set(d, scale), mg = hn::Set(d, margin);
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; j += N) {
-    const V d2 =
-        squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
-    const V reach = hn::Add(hn::Mul(sc, hn::LoadU(d, sigma + j)), mg);
-    const M in = hn::And(hn::Lt(d2, rr), hn::Lt(d2, hn::Mul(reach, reach)));
-    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, in), du, out + m);
-  }
-  return m;
+  const DL dl;
+  const std::size_t wide = n / hn::Lanes(dl) * hn::Lanes(dl);
+  const std::size_t m =
+      reach_from(dl, x, y, z, sigma, slots, 0, wide, origin, r2, scale, margin, out, 0);
+  return reach_from(D(), x, y, z, sigma, slots, wide, n, origin, r2, scale, margin, out, m);
 }
 
 const char* Target() {

@@ -3,13 +3,18 @@
 //! counting for a few values, by bins when their range is known), the distance counts that feed
 //! them (the adaptive scale's bands, the outlier tests' sums), and the selections of points by
 //! distance (the candidate kernels, the cell caches). The loops over points are vectorised with
-//! Google Highway for the processor the program runs on, in vectors of at most 8 floats; every
+//! Google Highway for the processor the program runs on, in vectors of 8 floats (16 with
+//! AVX-512 for the loops that mask their tails: the counts, bands and near-box copies); every
 //! target rounds as a plain scalar loop does, so the results are the same on every processor.
 
 #include <cstddef>
 #include <cstdint>
 
 namespace scanclean::detail {
+
+//! The loops that append (count_below_and_band, select_near_box) may store a whole vector past
+//! their last value (16 floats with AVX-512): their outputs need room for this many more.
+constexpr std::size_t kStoreSlack = 16;
 
 //! The k-th smallest (0-based rank) of v[0, n), k < n: the value std::nth_element would put at
 //! v[k]. For n <= kSmallSelect by counting (for each value, how many lie below it and at or
@@ -33,7 +38,7 @@ float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, 
 //! The squared distances d2_j = |p_j - q|^2 of the n points p_j = (x[j], y[j], z[j]), rounded
 //! as (dx dx + dy dy) + dz dz in float: adds to `below` the number with d2_j < lo2, and appends
 //! to band[m, ...) those with lo2 <= d2_j < hi2 (m grows by their number; band needs room for
-//! m + n + 8 values).
+//! m + n + kStoreSlack values).
 //! With the count below a band that brackets rank k (below <= k < below + m), the k-th
 //! smallest of all the d2 is the (k - below)-th smallest of the band.
 void count_below_and_band(const float* x, const float* y, const float* z, std::size_t n,
@@ -41,7 +46,7 @@ void count_below_and_band(const float* x, const float* y, const float* z, std::s
                           std::size_t& m);
 
 //! Where select_near_box appends: coordinates, and the slot and extra values when the inputs
-//! have them. Each needs room for m + n + 8 values.
+//! have them. Each needs room for m + n + kStoreSlack values.
 struct NearBoxOut {
   float *x = nullptr, *y = nullptr, *z = nullptr;
   std::uint32_t* slot = nullptr;
