@@ -44,16 +44,32 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       if (r != kNone) kept.push_back(r);
   }
   {
-    std::vector<std::size_t> seeds(kept.size());
-    for (std::size_t k = 0; k < kept.size(); ++k) seeds[k] = src[cl.seed[kept[k]]];
+    std::vector<std::uint32_t> seeds_s(kept.size());  // in the filter's order
+    std::vector<std::size_t> seeds(kept.size());      // input indices
+    parallel_each(kept.size(), [&](std::size_t k) {
+      seeds_s[k] = cl.seed[kept[k]];
+      seeds[k] = src[seeds_s[k]];
+    });
     PointCloud& out = result.cloud;
     out = select(input, seeds);
     out.grid = OrganizedGrid{};
     out.normals.resize(kept.size());
     std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
         si(kept.size()), dn(kept.size());
+    // The representatives and their seeds are scattered over memory: each output point's are
+    // fetched a few points ahead (the loads are independent, so they overlap).
+    constexpr std::size_t kAhead = 8;
     parallel_each(kept.size(), [&](std::size_t k) {
-      const std::uint32_t r = kept[k], s = cl.seed[r];
+      if (k + kAhead < kept.size()) {
+        const std::uint32_t ra = kept[k + kAhead], sa = seeds_s[k + kAhead];
+        __builtin_prefetch(&cl.position[ra]);
+        __builtin_prefetch(&cl.count[ra]);
+        __builtin_prefetch(&pr.normal[sa]);
+        __builtin_prefetch(&pr.L[sa]);
+        __builtin_prefetch(&pr.iterations[sa]);
+        __builtin_prefetch(&pr.state[sa]);
+      }
+      const std::uint32_t r = kept[k], s = seeds_s[k];
       out.positions[k] = cl.position[r] + origin;
       out.normals[k] = pr.normal[s];
       L[k] = pr.L[s];
