@@ -167,11 +167,13 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         thread_local OctantGroups groups;
         thread_local NearPoints near;
         queries.clear();
+        const float reach = ridx.max_adjacent_radius();
         const std::uint32_t cb = ridx.cell_begin(c), ce = ridx.cell_begin(c + 1);
         for (std::uint32_t s = cb; s < ce; ++s) {
           if (!want(s)) continue;
           const Eigen::Vector3f& q = ridx.slot_point(s);
-          if (hs[s] > 0 && ridx.adjacent_cell(q, hs[s]) == static_cast<std::int64_t>(c)) {
+          // The 27 cells around c hold every point within the grid's reach of a point of c.
+          if (hs[s] > 0 && hs[s] <= reach) {
             queries.push_back(s);
             continue;
           }
