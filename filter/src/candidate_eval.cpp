@@ -10,8 +10,9 @@
 
 // The loops over a point's candidates are written once with Google Highway and compiled for
 // every instruction set it targets on the build machine's architecture; the best one the
-// processor has runs. Vectors are capped at 8 floats (kCandidatePadding): AVX2 and AVX-512 take
-// 8 lanes and give the same results; 4-lane targets (SSE4, NEON) sum in another order.
+// processor has runs. The sums run in vectors of 8 floats (kCandidatePadding): AVX2 and AVX-512
+// sum in the same order and give the same results (AVX-512 takes 16 lanes only in the loops
+// without sums); 4-lane targets (SSE4, NEON) sum in another order.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "candidate_eval.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
