@@ -86,9 +86,10 @@ HWY_INLINE void e_and_d(DV d, const CandidateBuffer& b, std::size_t j, VV xs, VV
                     hn::MulAdd(dy, field(d, b, B::kNy, j), hn::Mul(dx, field(d, b, B::kNx, j))));
 }
 
-// Candidates [j, e) in whole vectors of dv: e_j kept where below t2 and within the slab (else
-// +inf) and d_j stored; returns the smallest kept e_j (+inf if none).
-template <class DV>
+// Candidates [j, e) in whole vectors of dv: e_j kept where within the slab and, with
+// kTruncate, below t2 (else +inf), stored with d_j; returns the smallest kept e_j (+inf if
+// none).
+template <bool kTruncate, class DV>
 HWY_INLINE float store_e_and_d(DV d, CandidateBuffer& b, std::size_t j, std::size_t e,
                                const float* x, float t2) {
   const std::size_t N = hn::Lanes(d);
@@ -101,8 +102,8 @@ HWY_INLINE float store_e_and_d(DV d, CandidateBuffer& b, std::size_t j, std::siz
   for (; j < e; j += N) {
     hn::Vec<DV> ej, dist;
     e_and_d(d, b, j, xs, ys, zs, ej, dist);
-    const auto keep =
-        hn::And(hn::Lt(ej, vt2), hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j)));
+    auto keep = hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j));
+    if constexpr (kTruncate) keep = hn::And(hn::Lt(ej, vt2), keep);
     const auto em = hn::IfThenElse(keep, ej, inf);
     vmin = hn::Min(vmin, em);
     hn::StoreU(em, d, e_out + j);
@@ -112,11 +113,12 @@ HWY_INLINE float store_e_and_d(DV d, CandidateBuffer& b, std::size_t j, std::siz
 }
 
 // The padded candidates in whole vectors of DL, then of D for a last 8.
+template <bool kTruncate>
 HWY_INLINE float store_e_and_d(CandidateBuffer& b, const float* x, float t2) {
   const DL dl;
   const std::size_t wide = b.padded / hn::Lanes(dl) * hn::Lanes(dl);
-  const float a = store_e_and_d(dl, b, 0, wide, x, t2);
-  return std::min(a, store_e_and_d(D(), b, wide, b.padded, x, t2));
+  const float a = store_e_and_d<kTruncate>(dl, b, 0, wide, x, t2);
+  return std::min(a, store_e_and_d<kTruncate>(D(), b, wide, b.padded, x, t2));
 }
 
 // The lanes of v summed in double, in lane order.
@@ -149,7 +151,7 @@ HWY_INLINE bool step_impl(CandidateBuffer& b, const float* x, const float* nref,
       hn::StoreU(em, d, e_out + j);
     }
   }
-  const float emin = kReuse ? hn::GetLane(hn::MinOfLanes(d, vmin)) : store_e_and_d(b, x, t2);
+  const float emin = kReuse ? hn::GetLane(hn::MinOfLanes(d, vmin)) : store_e_and_d<true>(b, x, t2);
   if (!(emin < std::numeric_limits<float>::infinity())) return false;
   V as = zero, adx = zero, ady = zero, adz = zero, anx = zero, any = zero, anz = zero, al = zero;
   const V emv = hn::Set(d, emin), floor = hn::Set(d, -80.0f), half = hn::Set(d, 0.5f);
@@ -194,30 +196,9 @@ bool StepReuse(CandidateBuffer& b, const float* nref, float t2, StepSums* out) {
   return step_impl<true>(b, nullptr, nref, t2, out);
 }
 
-// Candidates [j, e) of MinE in whole vectors of dv; returns their smallest slab-masked e_j.
-template <class DV>
-HWY_INLINE float min_e(DV d, CandidateBuffer& b, std::size_t j, std::size_t e, const float* x) {
-  const std::size_t N = hn::Lanes(d);
-  const auto inf = hn::Set(d, std::numeric_limits<float>::infinity());
-  const auto xs = hn::Set(d, x[0]), ys = hn::Set(d, x[1]), zs = hn::Set(d, x[2]);
-  float* e_out = b.f[B::kE].data();
-  float* d_out = b.d.data();
-  auto vmin = inf;
-  for (; j < e; j += N) {
-    hn::Vec<DV> ej, dist;
-    e_and_d(d, b, j, xs, ys, zs, ej, dist);
-    const auto em = hn::IfThenElse(hn::Lt(hn::Mul(dist, dist), field(d, b, B::kSlab2, j)), ej, inf);
-    hn::StoreU(em, d, e_out + j);
-    hn::StoreU(dist, d, d_out + j);
-    vmin = hn::Min(vmin, em);
-  }
-  return hn::GetLane(hn::MinOfLanes(d, vmin));
-}
-
+// The slab-masked e_j (not truncated) and d_j, and the smallest e_j.
 float MinE(CandidateBuffer& b, const float* x) {
-  const DL dl;
-  const std::size_t wide = b.padded / hn::Lanes(dl) * hn::Lanes(dl);
-  return std::min(min_e(dl, b, 0, wide, x), min_e(D(), b, wide, b.padded, x));
+  return store_e_and_d<false>(b, x, 0.0f);
 }
 
 double Likelihood(CandidateBuffer& b, const float* x, float t2) {

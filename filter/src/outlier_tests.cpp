@@ -274,13 +274,17 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         return m;
       };
       // The moves of the around points within h of s, their statistics.
-      auto move_stats_at = [&](std::size_t s, const NearPoints& near) {
-        thread_local std::vector<std::uint32_t> hits;
+      // The statistics of the moves of the around points hits[0, na) (those within h of s).
+      auto move_stats_of = [&](std::size_t s, const std::uint32_t* hits, std::size_t na) {
         thread_local std::vector<float> around_d;
-        const std::size_t na = around(s, near, hits);
         around_d.resize(na);
         for (std::size_t k = 0; k < na; ++k) around_d[k] = around_moved[hits[k]];
         return move_stats(around_d, s);
+      };
+      auto move_stats_at = [&](std::size_t s, const NearPoints& near) {
+        thread_local std::vector<std::uint32_t> hits;
+        const std::size_t na = around(s, near, hits);
+        return move_stats_of(s, hits.data(), na);
       };
       auto is_displaced = [&](std::size_t s, const MoveStats& m) {
         return m.scale > 0 && static_cast<double>(std::abs(moved[s] - m.median)) >
@@ -328,7 +332,7 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
               }
               rho[s] = static_cast<double>(sum) * static_cast<double>(stride);
               if (by_l) low_l[s] = na > 0 && at_or_below <= na / 4 ? 1 : 0;
-              if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats_at(s, near);
+              if (anchor) anchor_stats[s / kDisplacementAnchor] = move_stats_of(s, hits.data(), na);
             });
       });
       // Screen: a point whose move lies within half the threshold of the median of an anchor

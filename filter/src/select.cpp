@@ -218,41 +218,14 @@ void NearBox(const float* x, const float* y, const float* z, const std::uint32_t
   *m = k;
 }
 
-// Points [j, e) of Within8, in whole vectors of dv (e - j a multiple of its lanes); returns
-// the new count m. A whole vector is stored at m <= j (so within n); the count advances by the
-// selected.
-template <class DV>
-HWY_INLINE std::size_t within_from(DV d, const float* x, const float* y, const float* z,
-                                   const std::uint32_t* slots, std::size_t j, std::size_t e,
-                                   const float* origin, float r2, std::uint32_t* out,
-                                   std::size_t m) {
-  const hn::RebindToUnsigned<DV> du;
-  const std::size_t N = hn::Lanes(d);
-  const auto ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
-  const auto rr = hn::Set(d, r2);
-  for (; j < e; j += N) {
-    const auto d2 =
-        squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
-    m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, hn::Lt(d2, rr)), du, out + m);
-  }
-  return m;
-}
-
-// n a multiple of 8 (padded): whole vectors of DL, then (with 16 lanes) one of D for the last 8.
-std::size_t Within8(const float* x, const float* y, const float* z, const std::uint32_t* slots,
-                    std::size_t n, const float* origin, float r2, std::uint32_t* out) {
-  const DL dl;
-  const std::size_t wide = n / hn::Lanes(dl) * hn::Lanes(dl);
-  const std::size_t m = within_from(dl, x, y, z, slots, 0, wide, origin, r2, out, 0);
-  return within_from(D(), x, y, z, slots, wide, n, origin, r2, out, m);
-}
-
-// As within_from, for Reach8.
-template <class DV>
-HWY_INLINE std::size_t reach_from(DV d, const float* x, const float* y, const float* z,
-                                  const float* sigma, const std::uint32_t* slots, std::size_t j,
-                                  std::size_t e, const float* origin, float r2, float scale,
-                                  float margin, std::uint32_t* out, std::size_t m) {
+// Points [j, e) of Within8 and Reach8 (kReach: also within scale sigma + margin), in whole
+// vectors of dv (e - j a multiple of its lanes); returns the new count m. A whole vector is
+// stored at m <= j (so within n); the count advances by the selected.
+template <bool kReach, class DV>
+HWY_INLINE std::size_t select_from(DV d, const float* x, const float* y, const float* z,
+                                   const float* sigma, const std::uint32_t* slots, std::size_t j,
+                                   std::size_t e, const float* origin, float r2, float scale,
+                                   float margin, std::uint32_t* out, std::size_t m) {
   const hn::RebindToUnsigned<DV> du;
   const std::size_t N = hn::Lanes(d);
   const auto ox = hn::Set(d, origin[0]), oy = hn::Set(d, origin[1]), oz = hn::Set(d, origin[2]);
@@ -260,21 +233,39 @@ HWY_INLINE std::size_t reach_from(DV d, const float* x, const float* y, const fl
   for (; j < e; j += N) {
     const auto d2 =
         squared_distance(hn::LoadU(d, x + j), hn::LoadU(d, y + j), hn::LoadU(d, z + j), ox, oy, oz);
-    const auto reach = hn::Add(hn::Mul(sc, hn::LoadU(d, sigma + j)), mg);
-    const auto in = hn::And(hn::Lt(d2, rr), hn::Lt(d2, hn::Mul(reach, reach)));
+    auto in = hn::Lt(d2, rr);
+    if constexpr (kReach) {
+      const auto reach = hn::Add(hn::Mul(sc, hn::LoadU(d, sigma + j)), mg);
+      in = hn::And(in, hn::Lt(d2, hn::Mul(reach, reach)));
+    }
     m += compress_store(hn::LoadU(du, slots + j), hn::RebindMask(du, in), du, out + m);
   }
   return m;
 }
 
-std::size_t Reach8(const float* x, const float* y, const float* z, const float* sigma,
-                   const std::uint32_t* slots, std::size_t n, const float* origin, float r2,
-                   float scale, float margin, std::uint32_t* out) {
+// n a multiple of 8 (padded): whole vectors of DL, then (with 16 lanes) one of D for the last 8.
+template <bool kReach>
+HWY_INLINE std::size_t select_padded(const float* x, const float* y, const float* z,
+                                     const float* sigma, const std::uint32_t* slots, std::size_t n,
+                                     const float* origin, float r2, float scale, float margin,
+                                     std::uint32_t* out) {
   const DL dl;
   const std::size_t wide = n / hn::Lanes(dl) * hn::Lanes(dl);
   const std::size_t m =
-      reach_from(dl, x, y, z, sigma, slots, 0, wide, origin, r2, scale, margin, out, 0);
-  return reach_from(D(), x, y, z, sigma, slots, wide, n, origin, r2, scale, margin, out, m);
+      select_from<kReach>(dl, x, y, z, sigma, slots, 0, wide, origin, r2, scale, margin, out, 0);
+  return select_from<kReach>(D(), x, y, z, sigma, slots, wide, n, origin, r2, scale, margin, out,
+                             m);
+}
+
+std::size_t Within8(const float* x, const float* y, const float* z, const std::uint32_t* slots,
+                    std::size_t n, const float* origin, float r2, std::uint32_t* out) {
+  return select_padded<false>(x, y, z, nullptr, slots, n, origin, r2, 0.0f, 0.0f, out);
+}
+
+std::size_t Reach8(const float* x, const float* y, const float* z, const float* sigma,
+                   const std::uint32_t* slots, std::size_t n, const float* origin, float r2,
+                   float scale, float margin, std::uint32_t* out) {
+  return select_padded<true>(x, y, z, sigma, slots, n, origin, r2, scale, margin, out);
 }
 
 const char* Target() {
