@@ -10,6 +10,11 @@
 
 namespace scanclean::detail {
 
+double noise_start_radius(double h0, int k_h) {
+  if (k_h >= kNoiseNeighbours || k_h <= 0) return h0;
+  return h0 * std::sqrt(static_cast<double>(kNoiseNeighbours) / k_h);
+}
+
 NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
                        const NeighborIndex& index, const std::vector<std::size_t>& sigma_samples,
                        const std::vector<std::size_t>& test_samples, double h0, double diag,
@@ -47,7 +52,7 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     sig.erase(std::remove(sig.begin(), sig.end(), -1.0), sig.end());
     return median_of(sig);
   };
-  double hs = h0;
+  double hs = noise_start_radius(h0, o.k_h);
   double sigma = sigma_at(hs);
   ns.noise_sigma_h0 = sigma;
   for (int step = 0; step < 8 && o.noise_factor * sigma > hs * 1.02 && hs < diag; ++step) {
@@ -63,7 +68,12 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     // (trimmed, so clutter does not widen the intervals), floored like the kernels'
     // eigenvalues so that noise-free data keeps h near h_noise.
     ScaleSelectionOptions so;
-    for (int k = -4; k <= 2; ++k) so.radii.push_back(h * std::pow(2.0, k / 4.0));
+    // Not below half the noise estimate's first radius (about 24 neighbours; a no-op at the
+    // default K_h, where h / 2 >= h0 / 2): with K_h = 32 the test took h0 / 2, which holds about
+    // 8 points, fewer than a kernel needs (k_min), and left most points without support.
+    const double lowest = std::min(h, noise_start_radius(h0, o.k_h) / 2);
+    for (int k = -4; k <= 2; ++k)
+      if (const double r = h * std::pow(2.0, k / 4.0); r >= lowest) so.radii.push_back(r);
     so.gamma = o.scale_gamma;
     so.k_min = o.k_min;
     so.sigma = std::max(ns.noise_sigma, o.eigen_floor * h);

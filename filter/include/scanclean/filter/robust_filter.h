@@ -88,7 +88,9 @@ struct FilterStats {
   double h0 = 0;                //!< kAuto: the neighbour-distance median before the noise check
   double mean_spacing = 0;      //!< s = h0 / sqrt(K_h / pi) (kAuto), else h / sqrt(K / pi) (metres)
   double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise (metres)
-  double noise_sigma_h0 = 0;    //!< kAuto: the same at h0 (biased low when h0 < ~6 sigma)
+  //! kAuto: the same where the fixed point starts: h0, or with K_h < 96 about the radius of 96
+  //! neighbours (biased low when that is below ~6 sigma)
+  double noise_sigma_h0 = 0;
   double h_noise = 0;     //!< kAuto: max(h0, noise_factor sigma), before the scale test (metres)
   int kernel_stride = 1;  //!< kernels at every kernel_stride-th point
   double merge_eps = 0;   //!< merging distance used (metres)
