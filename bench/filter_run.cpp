@@ -23,6 +23,7 @@ std::string FilterSettings::describe() const {
   if (orient_k > 0) s << ", orient_k=" << orient_k;
   if (cgal_orient_k > 0) s << ", CGAL normals (PCA k=" << cgal_orient_k << ", MST)";
   if (scale_regions > 0) s << ", scale_regions=" << scale_regions;
+  if (k_h > 0) s << ", K_h=" << k_h;
   if (normals_orient_only) s << ", normals_orient_only";
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
@@ -54,6 +55,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   if (!settings.adaptive) options.scale_regions = settings.scale_regions;
   options.normals_orient_only = settings.normals_orient_only;
   options.orient_k = settings.orient_k;
+  if (settings.k_h > 0) options.k_h = settings.k_h;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r;
   if (settings.cgal_orient_k > 0 && !input.has_normals()) {

@@ -28,6 +28,7 @@ struct FilterSettings {
   //! normals itself); their time is part of seconds_wall.
   int cgal_orient_k = 0;
   int scale_regions = 0;             //!< FilterOptions::scale_regions (0: one h for the cloud)
+  int k_h = 0;                       //!< FilterOptions::k_h (0: the library's default)
   bool normals_orient_only = false;  //!< FilterOptions::normals_orient_only
   std::string describe() const;
 };

@@ -147,6 +147,11 @@ int run(int argc, char** argv) {
                  "quality and real suites: robust_filter's scale_regions (a scale per region, "
                  "as scanclean filter --scale-regions K; 0 = one h for the cloud)")
       ->check(CLI::Range(0, 256));
+  int k_h = 0;
+  app.add_option("--k-h", k_h,
+                 "quality, real and speed suites: robust_filter's K_h (as scanclean filter --k-h; "
+                 "0 = the library's default), to measure what it trades")
+      ->check(CLI::Range(0, 1000));
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
@@ -158,7 +163,7 @@ int run(int argc, char** argv) {
   }
   if (self_test) return self_test_main(seed);
   if (tune_n > 0) return tune_main(tune_n, seed + 1000, tune_sigma, bunny_mesh);
-  if (!speed_child.empty()) return speed_child_main(speed_child, speed_n, seed, threads);
+  if (!speed_child.empty()) return speed_child_main(speed_child, speed_n, seed, threads, k_h);
 
   std::unique_ptr<tbb::global_control> limit;
   if (threads > 0)
@@ -177,6 +182,7 @@ int run(int argc, char** argv) {
   ctx.orient_normals = orient_normals;
   ctx.cgal_orient_normals = cgal_orient_normals;
   ctx.scale_regions = scale_regions;
+  ctx.k_h = k_h;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

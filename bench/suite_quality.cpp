@@ -36,6 +36,7 @@ std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool 
     fs.orient_k = ctx.orient_normals;
     fs.cgal_orient_k = ctx.cgal_orient_normals;
     fs.scale_regions = ctx.scale_regions;
+    fs.k_h = ctx.k_h;
     m.push_back({"scanclean robust_filter", fs.describe(),
                  [fs](const Points& in) { return run_robust_filter(in, fs).cloud.positions; }});
   }

@@ -190,6 +190,7 @@ void run_real_suite(Context& ctx) {
   fs.orient_k = ctx.orient_normals;
   fs.cgal_orient_k = ctx.cgal_orient_normals;
   fs.scale_regions = ctx.scale_regions;
+  fs.k_h = ctx.k_h;
   FilterRun run = run_robust_filter(merged, fs);
   const DistanceStats before = distance_stats(md, merged.positions);
   const DistanceStats after = distance_stats(md, run.cloud.positions);

@@ -36,8 +36,11 @@ struct SpeedResult {
   double phases[6] = {0, 0, 0, 0, 0, 0};  // scale kernels projection clustering outliers total
 };
 
-std::string settings_of(const std::string& method, std::size_t n) {
+std::string settings_of(const std::string& method, std::size_t n, int k_h = 0) {
   const PeerSettings ps = peer_settings(kSpeedSigma, n);
+  // --k-h: the filter's rows are not at its defaults; they say so first.
+  if (k_h > 0 && method.rfind("filter", 0) == 0)
+    return "K_h=" + std::to_string(k_h) + " (not the default), " + settings_of(method, n, 0);
   if (method == "filter") return "defaults (merging on)";
   if (method == "filter_avx2")
     return "defaults (merging on); AVX-512 disabled at run time, as on a processor without it";
@@ -75,7 +78,7 @@ std::string display_name(const std::string& method) {
 SpeedResult run_child(const Context& ctx, const std::string& method, std::size_t n) {
   std::ostringstream cmd;
   cmd << "'" << ctx.self_exe.string() << "' --speed-child " << method << " --speed-n " << n
-      << " --seed " << ctx.seed << " --threads " << ctx.threads << " 2>&1";
+      << " --seed " << ctx.seed << " --threads " << ctx.threads << " --k-h " << ctx.k_h << " 2>&1";
   SpeedResult r;
   FILE* p = popen(cmd.str().c_str(), "r");
   if (p == nullptr) {
@@ -103,7 +106,8 @@ SpeedResult run_child(const Context& ctx, const std::string& method, std::size_t
 
 }  // namespace
 
-int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads) {
+int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads,
+                     int k_h) {
   std::unique_ptr<tbb::global_control> limit;
   if (threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -132,6 +136,7 @@ int speed_child_main(const std::string& method, std::size_t n, std::uint64_t see
     FilterSettings fs;
     fs.merge = true;
     fs.threads = threads;
+    fs.k_h = k_h;
     if (method.rfind("filter_adaptive250", 0) == 0) {
       fs.adaptive = true;
       fs.k_adaptive = 250;
@@ -202,8 +207,8 @@ void run_speed_suite(Context& ctx) {
   auto add_row = [&](const std::string& method, std::size_t n, const SpeedResult& r,
                      const std::string& remark) {
     if (!r.ok) {
-      t.rows.push_back({display_name(method), fmt_count(n), settings_of(method, n), "failed", "-",
-                        "-", "-", r.error.substr(0, 200)});
+      t.rows.push_back({display_name(method), fmt_count(n), settings_of(method, n, ctx.k_h),
+                        "failed", "-", "-", "-", r.error.substr(0, 200)});
       return;
     }
     const double delta = r.peak > r.baseline ? static_cast<double>(r.peak - r.baseline) : 0.0;
@@ -211,7 +216,7 @@ void run_speed_suite(Context& ctx) {
     if (method.rfind("filter", 0) == 0)
       phases = fmt(r.phases[0], 2) + " / " + fmt(r.phases[1], 2) + " / " + fmt(r.phases[2], 2) +
                " / " + fmt(r.phases[3], 2) + " / " + fmt(r.phases[4], 2);
-    t.rows.push_back({display_name(method) + remark, fmt_count(n), settings_of(method, n),
+    t.rows.push_back({display_name(method) + remark, fmt_count(n), settings_of(method, n, ctx.k_h),
                       fmt(r.seconds, 2), fmt_count(static_cast<std::size_t>(n / r.seconds)),
                       r.reset_ok ? fmt(delta / 1e6, 1) : "-",
                       r.reset_ok ? fmt(delta / static_cast<double>(n), 0) : "-", phases});
@@ -227,7 +232,8 @@ void run_speed_suite(Context& ctx) {
       if (!r.ok) continue;
       const double bpp = r.peak > r.baseline ? static_cast<double>(r.peak - r.baseline) / c.n : 0.0;
       const std::string label =
-          display_name(c.method) + " at " + fmt_count(c.n) +
+          display_name(c.method) + (ctx.k_h > 0 ? " with K_h = " + std::to_string(ctx.k_h) : "") +
+          " at " + fmt_count(c.n) +
           (c.method == "filter_adaptive250_stride1" ? " (kernel stride 1)" : "");
       if (c.method == "filter" && c.n >= 1000000) {
         const double pps = c.n / r.seconds;

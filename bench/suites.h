@@ -34,6 +34,8 @@ struct Context {
   int cgal_orient_normals = 0;
   //! quality and real suites: FilterOptions::scale_regions (0: one h for the cloud)
   int scale_regions = 0;
+  //! quality, real and speed suites: FilterOptions::k_h (0: the library's default)
+  int k_h = 0;
   //! mesh suite: write its PNG pictures into this folder (empty: none)
   std::filesystem::path pictures_dir;
   std::vector<Table> tables;
@@ -71,6 +73,8 @@ int tune_main(std::size_t n, std::uint64_t seed, double only_sigma,
               const std::filesystem::path& bunny);
 
 //! Entry point of a speed measurement child process (see suite_speed.cpp). Returns the exit code.
-int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads);
+//! k_h: FilterOptions::k_h for the filter's runs (0: the library's default).
+int speed_child_main(const std::string& method, std::size_t n, std::uint64_t seed, int threads,
+                     int k_h);
 
 }  // namespace scanclean::bench
