@@ -17,10 +17,11 @@ namespace scanclean::detail {
 
 //! The fewest neighbours the noise estimate starts from. A plane fitted to few noisy points
 //! follows their noise, and a window narrower than the noise band cuts it: both bias
-//! sqrt(lambda_3) low. With K_h = 32 on a sphere with noise sigma 1.5 h0 the estimate at h0 was
-//! a quarter of sigma, noise_factor times it stayed below h0, so the fixed point stopped there;
-//! the scale test then halved h and 96 % of the points were left without support (50k points,
-//! 1,796 out). Starting from about 96 neighbours (the default K_h) the estimate grows out of it.
+//! sqrt(lambda_3) low. With K_h = 32 on the 1M-point speed sphere (h0 = 1.5 sigma) the estimate
+//! at h0 was a quarter of sigma, noise_factor times it stayed below h0, so the fixed point
+//! stopped there; the scale test then halved h and 97 % of the points were left without support
+//! (28,249 out; a 50k-point sphere at 3.3 % noise: 1,796). Starting from about 96 neighbours (the
+//! default K_h) the estimate grows out of it.
 constexpr int kNoiseNeighbours = 96;
 //! The radius the noise fixed point starts from: h0 (the median K_h-th neighbour distance), or
 //! where K_h < kNoiseNeighbours, h0 sqrt(kNoiseNeighbours / K_h), about the radius that holds

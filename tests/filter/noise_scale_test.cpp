@@ -37,7 +37,7 @@ TEST(NoiseScaleTest, ASmallKhKeepsANoisySphere) {
       EXPECT_GT(r.stats.points_out, 9700u);
       EXPECT_LT(r.stats.unsupported, 100u);
       EXPECT_NEAR(r.stats.noise_sigma, sigma, 0.15 * sigma);
-      // h at least h0 and wide enough for the noise band (before: h0 / 2, 3 sigma at 1 %).
+      // h at least h0 and wide enough for the noise band (before: h0 / 2, under 6 sigma at 1 %).
       EXPECT_GE(r.stats.h, r.stats.h0);
       EXPECT_GT(r.stats.h, 6 * sigma);
       // The output lies on the sphere within the noise it removed.
