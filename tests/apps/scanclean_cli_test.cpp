@@ -245,6 +245,29 @@ TEST(ScancleanCliTest, ScaleRegionsOptionReachesTheFilter) {
   EXPECT_FALSE(fs::exists(dir / "out.ply"));
 }
 
+TEST(ScancleanCliTest, AFixedHThatLeavesMostPointsUnsupportedIsWarnedAbout) {
+  // 10,000 points on the unit sphere (spacing about 35 mm, noise 10 mm): h = 50 mm leaves three
+  // quarters of them without a kernel. The result is written (exit 0), in memory and tiled, with
+  // a warning that names the share and h; the automatic h gives no warning.
+  const auto dir = test::make_temp_dir("cli");
+  PointCloud cloud = test::noisy_sphere(10000, 1.0, 0.01, 6);  // seed 6
+  cloud.normals.clear();
+  write_point_cloud(dir / "in.ply", cloud);
+  for (const auto& extra : {std::vector<std::string>{"--h", "0.05"},
+                            std::vector<std::string>{"--h", "0.05", "--tiled"}}) {
+    const ProgramRun r = run_filter_in(dir, extra);
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "warning") && contains(r.err, "of 10,000 points") &&
+                contains(r.err, "h = 50 mm") && contains(r.err, "unsupported"))
+        << r.err;
+    EXPECT_TRUE(fs::exists(dir / "out.ply"));
+    fs::remove(dir / "out.ply");
+  }
+  const ProgramRun automatic = run_filter_in(dir, {});
+  ASSERT_EQ(automatic.exit_code, 0) << automatic.err;
+  EXPECT_FALSE(contains(automatic.err, "warning")) << automatic.err;
+}
+
 TEST(ScancleanCliTest, DisplacementOptionReachesTheFilter) {
   // Outliers 5-10 sigma off a noisy sphere are pulled onto it; the displacement test (on by
   // default) drops them and the summary counts them; --displacement-sigma 0 keeps them.
