@@ -76,21 +76,6 @@ std::size_t add_viewpoint_normals(const std::string& file, const std::vector<dou
   return n.with_normal;
 }
 
-// More than half of the points had no kernel within h: the output is what the kernels reached,
-// not the cloud's surface (h far too small for the cloud, or a cloud that is mostly scattered
-// points). It is written, since it may be what was asked for, with a warning that says so.
-void warn_if_mostly_unsupported(std::uint64_t unsupported, std::uint64_t points_in, double h) {
-  if (points_in == 0 || unsupported * 2 <= points_in) return;
-  std::fprintf(stderr,
-               "scanclean: warning: %s of %s points (%.0f %%) had no kernel support within h = "
-               "%.4g mm and were removed as unsupported; if the cloud is a surface, h is too "
-               "small for its spacing or noise (give a larger --h or --k, or the automatic "
-               "scale)\n",
-               with_thousands(unsupported).c_str(), with_thousands(points_in).c_str(),
-               100.0 * static_cast<double>(unsupported) / static_cast<double>(points_in),
-               h * 1000.0);
-}
-
 void print_warnings(const std::string& file, const ReadReport& report) {
   for (const auto& w : report.warnings) std::fprintf(stderr, "scanclean: warning: %s\n", w.c_str());
   if (report.dropped_invalid > 0)

@@ -36,6 +36,19 @@ void Summary::print() const {
   note_report_summary(title_, rows_);
 }
 
+void warn_if_mostly_unsupported(unsigned long long unsupported, unsigned long long points_in,
+                                double h) {
+  if (points_in == 0 || unsupported * 2 <= points_in) return;
+  std::fprintf(stderr,
+               "scanclean: warning: %s of %s points (%.0f %%) had no kernel support within h = "
+               "%.4g mm and were removed as unsupported; if the cloud is a surface, h is too "
+               "small for its spacing or noise (give a larger --h or --k, or the automatic "
+               "scale)\n",
+               with_thousands(unsupported).c_str(), with_thousands(points_in).c_str(),
+               100.0 * static_cast<double>(unsupported) / static_cast<double>(points_in),
+               h * 1000.0);
+}
+
 std::string with_thousands(unsigned long long value) {
   std::string s = std::to_string(value);
   for (int i = static_cast<int>(s.size()) - 3; i > 0; i -= 3)

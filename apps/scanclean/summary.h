@@ -35,4 +35,11 @@ class Summary {
 //! "1,234,567"
 std::string with_thousands(unsigned long long value);
 
+//! After the summary of a filter run: a warning on stderr when more than half of the points_in
+//! had no kernel within h (metres) and were removed as unsupported. The output is then what the
+//! kernels reached, not the cloud's surface (h far too small for the cloud, or a cloud that is
+//! mostly scattered points); it is written, since it may be what was asked for.
+void warn_if_mostly_unsupported(unsigned long long unsupported, unsigned long long points_in,
+                                double h);
+
 }  // namespace scanclean::app

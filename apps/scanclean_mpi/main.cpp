@@ -130,6 +130,7 @@ int run(int argc, char** argv, int rank, int ranks) {
         static_cast<unsigned long long>(s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
     sum.print();
     std::printf("rank tiles halo_points tile_seconds peak_MiB\n%s", per_rank.c_str());
+    if (r.written) warn_if_mostly_unsupported(s.unsupported, s.points_in, s.globals.h);
   }
   const bool collapsed =
       (s.points_out == 0 && s.points_in >= 1) || (s.points_out == 1 && s.points_in >= 2);

@@ -121,6 +121,29 @@ TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
         << np[1] << " processes: outliers differ";
   }
 }
+
+// A fixed h that leaves three quarters of a 10k unit sphere (spacing about 35 mm) without a
+// kernel: written, with the warning that scanclean filter gives (process 0 prints it once).
+TEST_F(TiledProgram, MpiWarnsWhenMostPointsAreUnsupported) {
+  if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  PointCloud sphere = test::noisy_sphere(10000, 1.0, 0.01, 6);  // seed 6
+  sphere.normals.clear();
+  write_ply(dir_ / "sphere.ply", sphere);
+  const auto r = test::run_program(
+      SCANCLEAN_MPIRUN,
+      {"-np", "2", "--mca", "btl_vader_single_copy_mechanism", "none", SCANCLEAN_MPI_PROGRAM,
+       (dir_ / "sphere.ply").string(), "-o", (dir_ / "sphere_out.ply").string(), "--h", "0.05"},
+      dir_, 300);
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_TRUE(fs::exists(dir_ / "sphere_out.ply"));
+  const std::string all = r.out + r.err;
+  const std::size_t at = all.find("of 10,000 points");
+  ASSERT_NE(at, std::string::npos) << all;
+  EXPECT_EQ(all.find("of 10,000 points", at + 1), std::string::npos) << "warned twice:\n" << all;
+  EXPECT_NE(all.find("h = 50 mm"), std::string::npos) << all;
+}
 #else
 TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
   GTEST_SKIP() << "scanclean-mpi not built (configure with -DSCANCLEAN_WITH_MPI=ON and install "
