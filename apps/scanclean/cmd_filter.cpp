@@ -174,7 +174,6 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
   sum.add("memory budget", static_cast<double>(t.memory_budget) / 1048576.0, 0, "MiB");
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
   sum.print();
-  if (r.written) warn_if_mostly_unsupported(s.unsupported, s.points_in, g.h);
   if (!r.written) {
     std::fprintf(stderr,
                  "scanclean filter: error: the result has %llu point(s) from %llu input points, "
@@ -183,6 +182,7 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
                  static_cast<unsigned long long>(s.points_in));
     return static_cast<int>(ExitCode::kEmptyResult);
   }
+  warn_if_mostly_unsupported(s.unsupported, s.points_in, g.h);
   return 0;
 }
 
@@ -398,7 +398,6 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   }
   run_mesh_handoff(*c.mesh, r.cloud, s.h, sum);
   sum.print();
-  if (!collapsed) warn_if_mostly_unsupported(s.unsupported, s.points_in, s.h);
   if (collapsed) {
     std::fprintf(stderr,
                  "scanclean filter: error: the result has %zu point(s) from %zu input points, "
@@ -407,6 +406,7 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
                  r.cloud.size(), r.stats.points_in, r.stats.h, r.stats.merge_eps);
     return static_cast<int>(ExitCode::kEmptyResult);
   }
+  warn_if_mostly_unsupported(s.unsupported, s.points_in, s.h);
   return 0;
 }
 

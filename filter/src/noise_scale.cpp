@@ -52,7 +52,8 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     sig.erase(std::remove(sig.begin(), sig.end(), -1.0), sig.end());
     return median_of(sig);
   };
-  double hs = noise_start_radius(h0, o.k_h);
+  const double start = noise_start_radius(h0, o.k_h);
+  double hs = start;
   double sigma = sigma_at(hs);
   ns.noise_sigma_h0 = sigma;
   for (int step = 0; step < 8 && o.noise_factor * sigma > hs * 1.02 && hs < diag; ++step) {
@@ -71,7 +72,7 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     // Not below half the noise estimate's first radius (about 24 neighbours; a no-op at the
     // default K_h, where h / 2 >= h0 / 2): with K_h = 32 the test took h0 / 2, which holds about
     // 8 points, fewer than a kernel needs (k_min), and left most points without support.
-    const double lowest = std::min(h, noise_start_radius(h0, o.k_h) / 2);
+    const double lowest = std::min(h, start / 2);
     for (int k = -4; k <= 2; ++k)
       if (const double r = h * std::pow(2.0, k / 4.0); r >= lowest) so.radii.push_back(r);
     so.gamma = o.scale_gamma;

@@ -20,11 +20,11 @@ TEST(NoiseScaleTest, StartsAtH0FromKNoiseNeighboursUp) {
   EXPECT_DOUBLE_EQ(noise_start_radius(0.03, 48), 0.03 * std::sqrt(2.0));
 }
 
-// 10,000 points on the unit sphere with noise sigma 0.02: with K_h = 32, h0 (about 0.11) is
-// small against the noise band. Before the fixed point started from about 96 neighbours, and
-// before the scale test kept to balls that hold enough of them, h fell to h0 / 2 (about 8 points
-// a ball, fewer than k_min) and 70-80 % of the points were removed as unsupported, with noise 1 %
-// and 2 % alike; on 50,000 points at 3.3 % noise the noise estimate was a third of sigma.
+// 10,000 points on the unit sphere with noise sigma 0.01 and 0.02: with K_h = 32, h0 (about
+// 0.11) is small against the noise band. Before the fixed point started from about 96
+// neighbours, and before the scale test kept to balls that hold enough of them, h fell to h0 / 2
+// (about 8 points a ball, fewer than k_min) and 60-98 % of the points were removed (K_h 32 and
+// 16); on 50,000 points at 3.3 % noise the noise estimate was a third of sigma.
 TEST(NoiseScaleTest, ASmallKhKeepsANoisySphere) {
   for (const double sigma : {0.01, 0.02}) {
     const PointCloud in = test::noisy_sphere(10000, 1.0, sigma, 6);
