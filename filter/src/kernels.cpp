@@ -73,7 +73,8 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
       thread_local std::vector<FitSample> gathered;
       KernelFit again;
       fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, again, &gathered);
-      if (refit_own_plane(gathered, d.p[i], h, refit, fit)) {
+      if (split_crease(gathered, d.p[i], refit, fit) ||
+          refit_own_plane(gathered, d.p[i], h, refit, fit)) {
         refitted[candidate(i)] = 1;
         const bool use_dir = prm.oriented && d.has_v(i);
         fit.n = kernel_normal(fit, use_dir, d.v_orients_only,

@@ -1,6 +1,9 @@
 #include "plane_refit.h"
 
+#include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 namespace scanclean::detail {
 
@@ -35,6 +38,190 @@ bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3
   const Eigen::Vector3f n_kept = fit.n;  // the caller's (a sensor normal stays)
   fit = trial;
   fit.n = n_kept;
+  return true;
+}
+
+namespace {
+
+struct SidePlane {
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();   //!< centroid (offset from the centre point)
+  Eigen::Vector3d n = Eigen::Vector3d::UnitZ();  //!< unit normal
+  double weight = 0;                             //!< sum of the chi weights of its samples
+  int count = 0;
+};
+
+// The plane of the samples with side[k] == want, every sample counted once (not by its chi
+// weight, which would let the blurred apex near the centre flatten the wedge); false with
+// fewer than k_min samples.
+bool fit_side(const std::vector<FitSample>& s, const std::vector<std::uint8_t>& side,
+              std::uint8_t want, int k_min, SidePlane& out) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double w = 0;
+  int count = 0;
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    if (side[k] != want) continue;
+    sum += Eigen::Vector3d(s[k].x, s[k].y, s[k].z);
+    w += s[k].t;
+    ++count;
+  }
+  if (count < std::max(3, k_min)) return false;
+  out.m = sum / count;
+  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    if (side[k] != want) continue;
+    const Eigen::Vector3d d = Eigen::Vector3d(s[k].x, s[k].y, s[k].z) - out.m;
+    c.noalias() += d * d.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c / count);
+  out.n = es.eigenvectors().col(0);
+  out.weight = w;
+  out.count = count;
+  return true;
+}
+
+// The mean squared residual of the samples from one plane (every sample counted once).
+double residual(const std::vector<FitSample>& s, const SidePlane& plane) {
+  double sum = 0;
+  for (const FitSample& q : s) {
+    const double r = plane.n.dot(Eigen::Vector3d(q.x, q.y, q.z) - plane.m);
+    sum += r * r;
+  }
+  return sum / static_cast<double>(s.size());
+}
+
+struct Wedge {
+  SidePlane plane[2];
+  Eigen::Vector3d b = Eigen::Vector3d::UnitX();  //!< normal of the plane separating the sides
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();   //!< a point of the planes' line
+  double r2 = -1;  //!< mean squared residual of the samples from their side's plane
+  //! The side of a point (offset from the centre point): 1 where b.(q - p) > 0.
+  std::uint8_t side_of(const Eigen::Vector3d& q) const { return b.dot(q - p) > 0 ? 1 : 0; }
+};
+
+// One wedge fit: the samples split by the plane through their centroid m0 normal to u, then
+// kCreaseRounds rounds of (a plane per side; the samples given to the sides by the plane through
+// the two planes' line that separates the sides' centroids). `side` receives the last split.
+// Returns false where the wedge degenerates (a side too small, the planes parallel).
+bool fit_wedge(const std::vector<FitSample>& s, const Eigen::Vector3d& m0, const Eigen::Vector3d& u,
+               int k_min, std::vector<std::uint8_t>& side, Wedge& w) {
+  const std::size_t ns = s.size();
+  for (std::size_t k = 0; k < ns; ++k)
+    side[k] = (Eigen::Vector3d(s[k].x, s[k].y, s[k].z) - m0).dot(u) > 0 ? 1 : 0;
+  for (int round = 0; round < kCreaseRounds; ++round) {
+    SidePlane(&pl)[2] = w.plane;
+    if (!fit_side(s, side, 0, k_min, pl[0]) || !fit_side(s, side, 1, k_min, pl[1])) return false;
+    const Eigen::Vector3d line = pl[0].n.cross(pl[1].n);
+    if (!(line.squaredNorm() > 1e-6)) return false;
+    Eigen::Matrix3d a;
+    a.row(0) = pl[0].n.transpose();
+    a.row(1) = pl[1].n.transpose();
+    a.row(2) = line.transpose();
+    w.p = a.inverse() * Eigen::Vector3d(pl[0].n.dot(pl[0].m), pl[1].n.dot(pl[1].m),
+                                        line.dot(0.5 * (pl[0].m + pl[1].m)));
+    // Of the two bisecting planes through the line, the one that separates the centroids.
+    const Eigen::Vector3d gap = pl[1].m - pl[0].m;
+    w.b = (pl[0].n - pl[1].n).normalized();
+    const Eigen::Vector3d b2 = (pl[0].n + pl[1].n).normalized();
+    if (std::abs(b2.dot(gap)) > std::abs(w.b.dot(gap))) w.b = b2;
+    if (w.b.dot(pl[1].m - w.p) < 0) w.b = -w.b;
+    double sum = 0;
+    for (std::size_t k = 0; k < ns; ++k) {
+      const Eigen::Vector3d q(s[k].x, s[k].y, s[k].z);
+      side[k] = w.side_of(q);
+      const double r = pl[side[k]].n.dot(q - pl[side[k]].m);
+      sum += r * r;
+    }
+    w.r2 = sum / static_cast<double>(ns);
+  }
+  return true;
+}
+
+}  // namespace
+
+bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
+                  const PlaneRefit& prm, KernelFit& fit) {
+  const std::size_t ns = samples.size();
+  if (!wants_refit(fit, prm) || ns < 2 * static_cast<std::size_t>(prm.k_min)) return false;
+  double total = 0;
+  for (const FitSample& q : samples) total += q.t;
+  thread_local std::vector<std::uint8_t> side;
+  side.assign(ns, 0);
+  SidePlane one;
+  if (!fit_side(samples, side, 0, prm.k_min, one)) return false;
+  double best_r2 = kCreaseGain * residual(samples, one);  // to beat
+  Wedge best;
+  bool found = false;
+  for (int dir = 0; dir < kCreaseDirections; ++dir) {
+    const double a = M_PI * dir / kCreaseDirections;
+    const Eigen::Vector3d u = std::cos(a) * fit.e.col(1) + std::sin(a) * fit.e.col(2);
+    Wedge w;
+    if (!fit_wedge(samples, one.m, u, prm.k_min, side, w) || !(w.r2 < best_r2)) continue;
+    if (std::abs(w.plane[0].n.dot(w.plane[1].n)) > kCreaseCos) continue;  // nearly parallel
+    if (std::min(w.plane[0].weight, w.plane[1].weight) < kCreaseMinShare * total) continue;
+    best_r2 = w.r2;
+    best = w;
+    found = true;
+  }
+  if (!found) return false;
+  // Two planes must explain the samples to the noise: a surface bent within h (a small sphere,
+  // a torus' tube) is also fitted better by a wedge than by one plane, but leaves more.
+  if (!(best.r2 < kCreaseSpread * kCreaseSpread * prm.sigma * prm.sigma)) return false;
+  // The kernel is fitted on the centre point's side, on the samples that lie on that side of
+  // the separating plane and farther than kCreaseMargin noise sigma from the line along the
+  // side's own plane. (Near the line the two sides' noise mixes: there the oblique separating
+  // plane alone would keep a side's samples by the sign of their noise and tilt the fit, and a
+  // cut along the plane alone would take in the other side's samples pushed across.)
+  const std::uint8_t own = best.side_of(Eigen::Vector3d::Zero());
+  const SidePlane& pl = best.plane[own];
+  Eigen::Vector3d v = pl.n.cross(best.plane[1 - own].n).cross(pl.n).normalized();
+  if (v.dot(pl.m - best.p) < 0) v = -v;  // into the side
+  const double margin = kCreaseMargin * prm.sigma;
+  thread_local std::vector<FitSample> sel;
+  sel.clear();
+  for (const FitSample& q : samples) {
+    const Eigen::Vector3d x(q.x, q.y, q.z);
+    if (best.side_of(x) == own && v.dot(x - best.p) > margin) sel.push_back(q);
+  }
+  // The kernel's frame is the side's plane (fitted on every sample of the side alike): with the
+  // chi weights of the centre point, the side's samples can spread less across the line than
+  // the noise does along the normal, and their weighted PCA would take that direction for the
+  // normal.
+  if (static_cast<int>(sel.size()) < prm.k_min) return false;
+  double w = 0;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const FitSample& q : sel) {
+    w += q.t;
+    sum += q.t * Eigen::Vector3d(q.x, q.y, q.z);
+  }
+  if (!(w > 0)) return false;
+  const Eigen::Vector3d m = sum / w;
+  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+  for (const FitSample& q : sel) {
+    const Eigen::Vector3d d = Eigen::Vector3d(q.x, q.y, q.z) - m;
+    c.noalias() += q.t * d * d.transpose();
+  }
+  c /= w;
+  // The side's plane again, on the selection (without the samples near the line).
+  side.assign(sel.size(), 0);
+  SidePlane own_plane;
+  if (!fit_side(sel, side, 0, prm.k_min, own_plane)) return false;
+  const Eigen::Vector3d n = own_plane.n;
+  const Eigen::Vector3d t1 = n.unitOrthogonal(), t2 = n.cross(t1);
+  Eigen::Matrix2d c2;
+  c2 << t1.dot(c * t1), t1.dot(c * t2), t2.dot(c * t1), t2.dot(c * t2);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es2(c2);
+  KernelFit trial;
+  trial.e.col(0) = n;
+  trial.e.col(1) = es2.eigenvectors()(0, 0) * t1 + es2.eigenvectors()(1, 0) * t2;
+  trial.e.col(2) = es2.eigenvectors()(0, 1) * t1 + es2.eigenvectors()(1, 1) * t2;
+  trial.lambda = Eigen::Vector3d(n.dot(c * n), std::max(0.0, es2.eigenvalues()[0]),
+                                 std::max(0.0, es2.eigenvalues()[1]));
+  trial.cov = trial.e * trial.lambda.asDiagonal() * trial.e.transpose();
+  trial.m = m;
+  trial.c = centre + m;
+  trial.weight = w;
+  trial.n = fit.n;  // the caller's (a sensor normal stays)
+  fit = trial;
   return true;
 }
 

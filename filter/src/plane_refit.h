@@ -38,4 +38,34 @@ inline bool wants_refit(const KernelFit& fit, const PlaneRefit& prm) {
 bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
                      const PlaneRefit& prm, KernelFit& fit);
 
+//! The crease split, tried before refit_own_plane where the spread asks for a refit. Two faces
+//! meeting at a sharp crease within h leave a kernel a blended plane (a rounded crease), and at
+//! 2-3 % noise the band of refit_own_plane (3 sigma) holds both faces near the crease, so it
+//! cannot separate them. Instead the neighbourhood is fitted with a wedge: two planes, each
+//! sample given to its side by the plane through their line that separates the sides (started
+//! from a split through the centroid in kCreaseDirections directions, kCreaseRounds rounds
+//! each). The planes count every sample alike: with the chi weights, which peak at the centre
+//! point, the apex blurred by the noise would flatten the wedge. The wedge with the least mean
+//! squared residual is kept if
+//! - it leaves less than kCreaseGain of the single plane's residual,
+//! - its planes' normals are more than 25 degrees apart (a noisy plane splits into two nearly
+//!   parallel halves, two sheets into parallel planes: refit_own_plane's case),
+//! - each side holds kCreaseMinShare of the chi weight, and
+//! - its residual is below (kCreaseSpread sigma)^2: a surface bent within h (a small sphere, a
+//!   torus' tube) is also fitted better by two planes than by one, but leaves more.
+//! The kernel is then fitted on the centre point's side of the wedge, without the samples within
+//! kCreaseMargin sigma of the line (measured along the side's plane), where the two sides' noise
+//! mixes. Its frame is that side's plane, refitted on those samples alike; its centroid, weight
+//! and the variances within the frame are chi-weighted as the other kernels' are. Returns true
+//! if `fit` was replaced; leaves `fit.n` as it was (the caller re-derives a normal from `fit.e`).
+constexpr int kCreaseDirections = 4;
+constexpr int kCreaseRounds = 5;
+constexpr double kCreaseGain = 0.6;
+constexpr double kCreaseCos = 0.9063;  // cos 25 degrees
+constexpr double kCreaseMinShare = 0.15;
+constexpr double kCreaseSpread = 1.3;
+constexpr double kCreaseMargin = 2.0;
+bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
+                  const PlaneRefit& prm, KernelFit& fit);
+
 }  // namespace scanclean::detail
