@@ -82,6 +82,7 @@ void validate(const FilterOptions& o) {
   check_real("displacement_sigma", o.displacement_sigma, 0, 100, false);
   check_real("outlier_sigma", o.outlier_sigma, 0, 100, false);
   check_real("refit_spread", o.refit_spread, 0, 100, false);
+  check_real("refit_noise_sigma", o.refit_noise_sigma, 0, 1e6, false);
   if (o.min_component_size > 1000000000ULL)
     bad_option("min_component_size", to_str(o.min_component_size),
                "0 (automatic) or a point count <= 1e9");

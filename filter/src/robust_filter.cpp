@@ -261,7 +261,10 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   prm.kernel_cell = scale.h_grid_kernels;
   prm.gather_factor = detail::candidate_radius(o);
   prm.stride = kernel_stride(o, h, st.h0);
-  if (o.scale == ScaleMode::kAuto) prm.noise_sigma = std::max(st.noise_sigma, o.eigen_floor * h);
+  if (o.scale == ScaleMode::kAuto)
+    prm.noise_sigma = std::max(st.noise_sigma, o.eigen_floor * h);
+  else if (o.refit_noise_sigma > 0)  // given (a tile of the tiled filter)
+    prm.noise_sigma = std::max(o.refit_noise_sigma, o.eigen_floor * h);
   st.kernel_stride = static_cast<int>(prm.stride);
   t = Clock::now();
   std::vector<Eigen::Vector3f> nref;

@@ -940,6 +940,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   if (o.scale == ScaleMode::kAuto) {
     to.scale = ScaleMode::kFixed;
     to.h = gl.h;
+    to.refit_noise_sigma = gl.noise_sigma;  // the refit's, as the in-memory run's
   }
   to.kernel_stride = gl.kernel_stride;
   to.merge_eps = gl.merge_eps;

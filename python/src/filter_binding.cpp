@@ -53,6 +53,7 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["displacement_sigma"] = o.displacement_sigma;
   d["outlier_sigma"] = o.outlier_sigma;
   d["refit_spread"] = o.refit_spread;
+  d["refit_noise_sigma"] = o.refit_noise_sigma;
   d["remove_small_components"] = o.remove_small_components;
   d["min_component_size"] = o.min_component_size;
   d["use_sensor_normals"] = o.use_sensor_normals;
@@ -148,6 +149,8 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.outlier_sigma = as<double>(v, k);
     else if (k == "refit_spread")
       o.refit_spread = as<double>(v, k);
+    else if (k == "refit_noise_sigma")
+      o.refit_noise_sigma = as<double>(v, k);
     else if (k == "remove_small_components")
       o.remove_small_components = as<bool>(v, k);
     else if (k == "min_component_size")

@@ -700,6 +700,8 @@ TEST(RobustFilterTest, ValidateRejectsEachBadOption) {
       {"displacement_sigma", [](FilterOptions& o) { o.displacement_sigma = 1e9; }},
       {"refit_spread", [](FilterOptions& o) { o.refit_spread = -0.5; }},
       {"refit_spread", [](FilterOptions& o) { o.refit_spread = std::nan(""); }},
+      {"refit_noise_sigma", [](FilterOptions& o) { o.refit_noise_sigma = -0.01; }},
+      {"refit_noise_sigma", [](FilterOptions& o) { o.refit_noise_sigma = INFINITY; }},
       {"threads", [](FilterOptions& o) { o.threads = -1; }},
       {"min_component_size", [](FilterOptions& o) { o.min_component_size = 10000000000ULL; }},
   };

@@ -118,21 +118,30 @@ struct FilterOptions {
   //! would otherwise carry onto it; without leaving them out, a point's own kernel, and in pairs
   //! and clumps of outliers each other's, pulled towards them by their weights, would vouch.
   double outlier_sigma = 4.0;
-  //! Own-plane refit of the kernels (kAuto only: it needs the noise estimate), [0, 100]; 0 =
-  //! off. A kernel whose plane leaves a residual spread sqrt(lambda_3) above refit_spread x the
-  //! cloud's noise sigma (two sheets of a thin part within h, a sharp crease, detail finer than
-  //! h) is refitted on the neighbours within 3 sigma of the plane through its own point (kept
-  //! when those left out hold at least 10 % of its weight), so that it describes its own sheet
-  //! or its own side of the crease; the projection's truncation then keeps the other side's
-  //! kernels from pulling points across. 1.2 was the best of 1.2 / 1.5 / 2 / 3 on the
-  //! benchmark's shapes at the known limits (thin plate, creases, two scales) and left the smooth
-  //! shapes' outputs unchanged; on the merged bunny scans it lowered the 95th
-  //! percentile distance (0.138 -> 0.133 mm) but raised the mean and RMS slightly, because it
-  //! also keeps misregistered scan layers apart (bench/README.md, "Defaults"). Off by default
-  //! for that reason: the defaults must not move the real scans farther from the reference
-  //! (mean 0.046 -> 0.047 mm, RMS 0.071 -> 0.079 mm with 1.2). 1.2 is the recommended value
-  //! for CAD parts, thin parts and low-noise scans of sharp objects.
+  //! Own-plane refit of the kernels (kAuto, or a fixed h with refit_noise_sigma: it needs the
+  //! noise sigma), [0, 100]; 0 = off. A kernel whose plane leaves a residual spread
+  //! sqrt(lambda_3) above refit_spread x the cloud's noise sigma (two sheets of a thin part
+  //! within h, a sharp crease, detail finer than h) is refitted so that it describes its own
+  //! sheet or its own side of the crease; the projection's truncation then keeps the other
+  //! side's kernels from pulling points across. First the crease split: where a wedge (two
+  //! planes more than 25 degrees apart) explains the neighbours to the noise and far better
+  //! than one plane, the kernel is refitted on its own point's face, away from the crease line;
+  //! it works at 2-3 % noise, where the band of the sheet refit holds both faces. Else the sheet
+  //! refit: the neighbours within 3 sigma of the plane through its own point (kept when those
+  //! left out hold at least 10 % of its weight). 1.1 is the recommended value for CAD parts,
+  //! thin parts and scans of sharp objects: on the benchmark's shapes at the known limits it
+  //! lowered CD by up to 22 % (sharp box, 50k points, 3 % noise); on the protocol's smooth
+  //! shapes CD moved by -7 to +1.7 % (the bunny mesh better, a torus and a rounded box at 10k
+  //! points up to 1.7 % worse); on the merged bunny scans it lowered the 95th percentile
+  //! distance but raised the mean and RMS slightly, because it also keeps misregistered scan
+  //! layers apart (README, "Shapes at the known limits"). Off by default for that reason: the
+  //! defaults must not move the real scans farther from the reference.
   double refit_spread = 0;
+  //! The noise sigma (metres) the refit compares against where h is not automatic, [0, 1e6];
+  //! 0 = none (the refit is then off with a fixed or adaptive h). The tiled filter, whose tiles
+  //! run with the whole cloud's h fixed, passes them the whole cloud's estimate here, so that a
+  //! tiled run refits as the in-memory run does.
+  double refit_noise_sigma = 0;
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
   bool use_sensor_normals = true;        //!< input normals (non-zero ones) replace PCA normals
