@@ -65,14 +65,12 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
       else
         idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
     };
-    const bool ok = fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, fit);
+    // With the refit on, the neighbours are also kept untrimmed, for it.
+    thread_local std::vector<FitSample> gathered;
+    const bool ok = fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, fit,
+                               refit.active() ? &gathered : nullptr);
     if (!ok) return;
     if (wants_refit(fit, refit)) {
-      // Rare on smooth surfaces: only here are the neighbours gathered again, untrimmed (the
-      // same fit is solved again on the way).
-      thread_local std::vector<FitSample> gathered;
-      KernelFit again;
-      fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, again, &gathered);
       if (split_crease(gathered, d.p[i], refit, fit) ||
           refit_own_plane(gathered, d.p[i], h, refit, fit)) {
         refitted[candidate(i)] = 1;

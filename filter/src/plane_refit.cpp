@@ -18,21 +18,29 @@ bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3
   Eigen::Vector3d n = fit.e.col(0);
   Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // the centre point
   KernelFit trial;
+  double total = 0;
+  for (const FitSample& q : samples) total += q.t;
   for (int round = 0; round < kRounds; ++round) {
     sel.clear();
+    double kept = 0;
     for (const FitSample& q : samples) {
       const double r =
           n.x() * (q.x - anchor.x()) + n.y() * (q.y - anchor.y()) + n.z() * (q.z - anchor.z());
-      if (std::abs(r) < band) sel.push_back(q);
+      if (std::abs(r) < band) {
+        sel.push_back(q);
+        kept += q.t;
+      }
     }
+    // The first band around the centre point's plane leaving out less than half the share
+    // asked for below: a noisy plane (most kernels that ask for the refit at 2-3 % noise),
+    // not worth the refits.
+    if (round == 0 && !(kept < (1.0 - 0.5 * kMinOther) * total)) return false;
     if (!fit_samples(sel, centre, h, prm.k_min, prm.eigen_floor, trial)) return false;
     n = trial.e.col(0);
     anchor = trial.m;
   }
   // A second structure must hold a real share of the neighbourhood: on a noisy plane whose
   // spread is merely high by chance the band keeps almost everything (over 99 %).
-  double total = 0;
-  for (const FitSample& q : samples) total += q.t;
   if (!(trial.weight < (1.0 - kMinOther) * total)) return false;
   if (!(std::sqrt(trial.lambda[0]) < spread)) return false;
   const Eigen::Vector3f n_kept = fit.n;  // the caller's (a sensor normal stays)
@@ -148,7 +156,12 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   side.assign(ns, 0);
   SidePlane one;
   if (!fit_side(samples, side, 0, prm.k_min, one)) return false;
-  double best_r2 = kCreaseGain * residual(samples, one);  // to beat
+  const double r2_one = residual(samples, one);
+  // Where the plane leaves the samples alike not much more than it leaves them weighted by chi,
+  // nothing bends away from it towards the rim of the ball: no crease (a cheap test first; at
+  // 2-3 % noise most kernels' spread asks for the refit).
+  if (!(r2_one > kCreaseBend * fit.lambda[0])) return false;
+  double best_r2 = kCreaseGain * r2_one;  // to beat
   Wedge best;
   bool found = false;
   for (int dir = 0; dir < kCreaseDirections; ++dir) {

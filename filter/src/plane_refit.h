@@ -45,7 +45,9 @@ bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3
 //! sample given to its side by the plane through their line that separates the sides (started
 //! from a split through the centroid in kCreaseDirections directions, kCreaseRounds rounds
 //! each). The planes count every sample alike: with the chi weights, which peak at the centre
-//! point, the apex blurred by the noise would flatten the wedge. The wedge with the least mean
+//! point, the apex blurred by the noise would flatten the wedge. It is only tried where the single
+//! plane, fitted on the samples alike, leaves them more than kCreaseBend times the chi-weighted
+//! spread lambda_3 (the far samples bend away from the plane). The wedge with the least mean
 //! squared residual is kept if
 //! - it leaves less than kCreaseGain of the single plane's residual,
 //! - its planes' normals are more than 25 degrees apart (a noisy plane splits into two nearly
@@ -65,6 +67,7 @@ constexpr double kCreaseCos = 0.9063;  // cos 25 degrees
 constexpr double kCreaseMinShare = 0.15;
 constexpr double kCreaseSpread = 1.3;
 constexpr double kCreaseMargin = 2.0;
+constexpr double kCreaseBend = 1.4;
 bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
                   const PlaneRefit& prm, KernelFit& fit);
 
