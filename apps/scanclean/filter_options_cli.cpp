@@ -66,9 +66,10 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
       ->check(number_in(0, 1))
       ->capture_default_str();
   cmd.add_option("--refit-spread", v->refit_spread,
-                 "Refit a kernel on the neighbours near the plane through its own point when its "
-                 "plane leaves more than this many noise sigma as spread (two sheets within h, a "
-                 "crease; automatic h only; 0 = off; 1.2 suits CAD parts and thin parts)")
+                 "Refit a kernel when its plane leaves more than this many noise sigma as spread: "
+                 "on its own face where two planes meet in a crease, on its own sheet where two "
+                 "sheets lie within h (automatic h, also tiled; 0 = off; 1.1 suits CAD parts, thin "
+                 "parts and sharp objects)")
       ->check(number_in(0, 100))
       ->capture_default_str();
   cmd.add_option("--outlier-sigma", v->outlier_sigma,
