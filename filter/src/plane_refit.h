@@ -7,7 +7,8 @@
 //! near the plane through its own centre point: only those within 3 noise sigma of the plane
 //! (the plane refitted on them and the selection repeated, three times), provided the
 //! neighbours left out hold at least 10 % of the chi weight (a second structure, not a noisy
-//! plane whose spread is high by chance). The kernel then
+//! plane whose spread is high by chance; where the first band already keeps over 95 % of it,
+//! the refit stops there). The kernel then
 //! describes its own sheet or its own side of the crease, and the projection's truncation
 //! (Mahalanobis distance, slab) keeps the other side's kernels from pulling a point across.
 
