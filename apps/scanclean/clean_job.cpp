@@ -242,6 +242,7 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
 
   std::vector<std::filesystem::path> written;
   std::vector<std::string> collapsed;  // windows not written: empty or one point
+  std::size_t mostly_unsupported = 0;  // windows written with most points unsupported
   std::size_t windows_seen = 0;
   const bool single = options.accumulate == 0;
   std::vector<WindowOutput> pending;  // to know whether there is more than one window
@@ -253,6 +254,14 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
                           with_thousands(in) + " (h " + std::to_string(w.filter.h * 1e3) +
                           " mm, merge eps " + std::to_string(w.filter.merge_eps * 1e3) + " mm)");
       return;
+    }
+    if (!options.window.raw && w.filter.unsupported * 2 > w.filter.points_in) {
+      // Written, but most of the window had no kernel support: said once, counted at the end.
+      if (mostly_unsupported++ == 0) {
+        std::fprintf(stderr, "scanclean %s: window %zu (%s):\n", command.c_str(), w.window,
+                     p.string().c_str());
+        warn_if_mostly_unsupported(w.filter.unsupported, w.filter.points_in, w.filter.h);
+      }
     }
     AtomicCommitGroup both;  // the cloud and its outliers, or neither
     WriteOptions wo;         // provenance: command line, h, noise sigma
@@ -385,8 +394,15 @@ int run_clean_job(const std::string& command, RangeSource& source, PipelineOptio
                           " .. " + written.back().string());
   }
   if (!collapsed.empty()) sum.add_count("windows not written (collapsed)", collapsed.size());
+  if (mostly_unsupported > 0)
+    sum.add_count("windows mostly unsupported (written)", mostly_unsupported);
   if (!preview_text.empty()) sum.add("preview", preview_text);
   sum.print();
+  if (mostly_unsupported > 1)
+    std::fprintf(stderr,
+                 "scanclean %s: warning: %zu windows in all left more than half of their points "
+                 "unsupported (the first is named above)\n",
+                 command.c_str(), mostly_unsupported);
   if (st.stop == StopReason::kInterrupted) return static_cast<int>(ExitCode::kInterrupted);
   if (st.stop == StopReason::kError) {
     std::fprintf(stderr, "scanclean %s: error: the source failed: %s\n", command.c_str(),

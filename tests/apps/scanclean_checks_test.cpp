@@ -309,6 +309,29 @@ TEST(ScancleanChecksTest, AHugeNumberInSessionJsonIsAnInputErrorNamingFileAndKey
   EXPECT_TRUE(has(r.err, "key \"fx\"")) << r.err;
 }
 
+TEST(ScancleanChecksTest, AReplayWindowLeftMostlyUnsupportedIsWarnedAbout) {
+  // h = 2 mm on the 3dj recording's depth frames (points about 2-6 mm apart) leaves almost every
+  // point without a kernel: a few hundred points are written (exit 0), with a warning that
+  // names the window, the share and h, and a summary row. The automatic h gives no warning.
+  const auto dir = test::make_temp_dir("checks");
+  const fs::path rec = small_recording(dir);
+  const Outcome r =
+      run({"replay", rec.string(), "-o", (dir / "o.ply").string(), "--h", "0.002"}, dir);
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "o.ply"));
+  EXPECT_TRUE(has(r.err, "window 0") && has(r.err, "warning") && has(r.err, "h = 2 mm") &&
+              has(r.err, "unsupported"))
+      << r.err;
+  const auto row = r.out.find("windows mostly unsupported (written):");
+  ASSERT_NE(row, std::string::npos) << r.out;
+  const std::string line = r.out.substr(row, r.out.find('\n', row) - row);
+  EXPECT_EQ(line.substr(line.find_last_of(' ') + 1), "1") << line;  // one window
+  const Outcome automatic = run({"replay", rec.string(), "-o", (dir / "a.ply").string()}, dir);
+  EXPECT_EQ(automatic.exit_code, 0) << automatic.err;
+  EXPECT_FALSE(has(automatic.err, "warning")) << automatic.err;
+  EXPECT_FALSE(has(automatic.out, "mostly unsupported")) << automatic.out;
+}
+
 TEST(ScancleanChecksTest, RecordingRecoveryWarningsArePrinted) {
   const auto dir = test::make_temp_dir("checks");
   const fs::path rec = small_recording(dir);
