@@ -58,33 +58,58 @@ struct SidePlane {
   int count = 0;
 };
 
-// The plane of the samples with side[k] == want, every sample counted once (not by its chi
-// weight, which would let the blurred apex near the centre flatten the wedge); false with
-// fewer than k_min samples.
+// The samples k with keep(k): their weight (their chi weights, or 1 each), mean and covariance
+// under it, count and chi weight.
+struct Moments {
+  double w = 0, chi = 0;
+  int count = 0;
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+};
+template <class Keep>
+Moments moments(const std::vector<FitSample>& s, bool chi_weighted, Keep&& keep) {
+  Moments mo;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    if (!keep(k)) continue;
+    const double t = chi_weighted ? s[k].t : 1.0;
+    mo.w += t;
+    sum += t * Eigen::Vector3d(s[k].x, s[k].y, s[k].z);
+    mo.chi += s[k].t;
+    ++mo.count;
+  }
+  if (!(mo.w > 0)) return mo;
+  mo.m = sum / mo.w;
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    if (!keep(k)) continue;
+    const double t = chi_weighted ? s[k].t : 1.0;
+    const Eigen::Vector3d d = Eigen::Vector3d(s[k].x, s[k].y, s[k].z) - mo.m;
+    mo.c.noalias() += t * d * d.transpose();
+  }
+  mo.c /= mo.w;
+  return mo;
+}
+
+// The plane of the samples k with keep(k), every sample counted once (not by its chi weight,
+// which would let the blurred apex near the centre flatten the wedge); false with fewer than
+// k_min samples.
+template <class Keep>
+bool fit_plane(const std::vector<FitSample>& s, int k_min, Keep&& keep, SidePlane& out) {
+  const Moments mo = moments(s, false, keep);
+  if (mo.count < std::max(3, k_min)) return false;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(mo.c);
+  out.m = mo.m;
+  out.n = es.eigenvectors().col(0);
+  out.weight = mo.chi;
+  out.count = mo.count;
+  return true;
+}
+
+// fit_plane on the samples with side[k] == want.
 bool fit_side(const std::vector<FitSample>& s, const std::vector<std::uint8_t>& side,
               std::uint8_t want, int k_min, SidePlane& out) {
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  double w = 0;
-  int count = 0;
-  for (std::size_t k = 0; k < s.size(); ++k) {
-    if (side[k] != want) continue;
-    sum += Eigen::Vector3d(s[k].x, s[k].y, s[k].z);
-    w += s[k].t;
-    ++count;
-  }
-  if (count < std::max(3, k_min)) return false;
-  out.m = sum / count;
-  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
-  for (std::size_t k = 0; k < s.size(); ++k) {
-    if (side[k] != want) continue;
-    const Eigen::Vector3d d = Eigen::Vector3d(s[k].x, s[k].y, s[k].z) - out.m;
-    c.noalias() += d * d.transpose();
-  }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(c / count);
-  out.n = es.eigenvectors().col(0);
-  out.weight = w;
-  out.count = count;
-  return true;
+  return fit_plane(
+      s, k_min, [&](std::size_t k) { return side[k] == want; }, out);
 }
 
 // The mean squared residual of the samples from one plane (every sample counted once).
@@ -152,10 +177,11 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   if (!wants_refit(fit, prm) || ns < 2 * static_cast<std::size_t>(prm.k_min)) return false;
   double total = 0;
   for (const FitSample& q : samples) total += q.t;
+  const auto all = [](std::size_t) { return true; };
   thread_local std::vector<std::uint8_t> side;
-  side.assign(ns, 0);
+  side.resize(ns);
   SidePlane one;
-  if (!fit_side(samples, side, 0, prm.k_min, one)) return false;
+  if (!fit_plane(samples, prm.k_min, all, one)) return false;
   const double r2_one = residual(samples, one);
   // Where the plane leaves the samples alike not much more than it leaves them weighted by chi,
   // nothing bends away from it towards the rim of the ball: no crease (a cheap test first; at
@@ -200,24 +226,13 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   // the noise does along the normal, and their weighted PCA would take that direction for the
   // normal.
   if (static_cast<int>(sel.size()) < prm.k_min) return false;
-  double w = 0;
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  for (const FitSample& q : sel) {
-    w += q.t;
-    sum += q.t * Eigen::Vector3d(q.x, q.y, q.z);
-  }
-  if (!(w > 0)) return false;
-  const Eigen::Vector3d m = sum / w;
-  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
-  for (const FitSample& q : sel) {
-    const Eigen::Vector3d d = Eigen::Vector3d(q.x, q.y, q.z) - m;
-    c.noalias() += q.t * d * d.transpose();
-  }
-  c /= w;
+  const Moments mo = moments(sel, true, all);
+  if (!(mo.w > 0)) return false;
+  const Eigen::Vector3d& m = mo.m;
+  const Eigen::Matrix3d& c = mo.c;
   // The side's plane again, on the selection (without the samples near the line).
-  side.assign(sel.size(), 0);
   SidePlane own_plane;
-  if (!fit_side(sel, side, 0, prm.k_min, own_plane)) return false;
+  if (!fit_plane(sel, prm.k_min, all, own_plane)) return false;
   const Eigen::Vector3d n = own_plane.n;
   const Eigen::Vector3d t1 = n.unitOrthogonal(), t2 = n.cross(t1);
   Eigen::Matrix2d c2;
@@ -232,7 +247,7 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   trial.cov = trial.e * trial.lambda.asDiagonal() * trial.e.transpose();
   trial.m = m;
   trial.c = centre + m;
-  trial.weight = w;
+  trial.weight = mo.w;
   trial.n = fit.n;  // the caller's (a sensor normal stays)
   fit = trial;
   return true;
