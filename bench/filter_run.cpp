@@ -20,6 +20,7 @@ std::string FilterSettings::describe() const {
   if (adaptive) s << ", scale=adaptive k=" << k_adaptive;
   if (kernel_stride > 0) s << ", kernel_stride=" << kernel_stride;
   if (refit_spread >= 0) s << ", refit_spread=" << refit_spread;
+  if (crease_spread >= 0) s << ", crease_spread=" << crease_spread;
   if (orient_k > 0) s << ", orient_k=" << orient_k;
   if (cgal_orient_k > 0) s << ", CGAL normals (PCA k=" << cgal_orient_k << ", MST)";
   if (scale_regions > 0) s << ", scale_regions=" << scale_regions;
@@ -52,6 +53,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   options.kernel_stride = settings.kernel_stride;
   options.threads = settings.threads;
   if (settings.refit_spread >= 0) options.refit_spread = settings.refit_spread;
+  if (settings.crease_spread >= 0) options.crease_spread = settings.crease_spread;
   if (!settings.adaptive) options.scale_regions = settings.scale_regions;
   options.normals_orient_only = settings.normals_orient_only;
   options.orient_k = settings.orient_k;
@@ -97,6 +99,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   run.mean_iterations = s.mean_iterations;
   run.kernels = s.kernels;
   run.kernels_refitted = s.kernels_refitted;
+  run.kernels_split = s.kernels_split;
   run.p95_iterations = s.p95_iterations;
   run.unsupported = s.unsupported;
   run.off_surface = s.off_surface;

@@ -17,9 +17,10 @@ struct FilterSettings {
   bool merge = false;     //!< false: merge_eps = 0 (protocol mode, counts match the input)
   bool adaptive = false;  //!< ScaleMode::kAdaptive with k_adaptive
   int k_adaptive = 48;
-  int kernel_stride = 0;     //!< FilterOptions::kernel_stride (0 = automatic)
-  int threads = 0;           //!< FilterOptions::threads (0 = all cores)
-  double refit_spread = -1;  //!< FilterOptions::refit_spread (< 0: the library's default)
+  int kernel_stride = 0;      //!< FilterOptions::kernel_stride (0 = automatic)
+  int threads = 0;            //!< FilterOptions::threads (0 = all cores)
+  double refit_spread = -1;   //!< FilterOptions::refit_spread (< 0: the library's default)
+  double crease_spread = -1;  //!< FilterOptions::crease_spread (< 0: the library's default)
   //! FilterOptions::orient_k (as `scanclean filter --orient-normals K`; 0 = off).
   int orient_k = 0;
   //! > 0, for comparison: a cloud without normals gets them from CGAL first (PCA over this many
@@ -40,7 +41,7 @@ struct FilterRun {
   double seconds_wall = 0;                    //!< measured around the call
   // FilterStats, copied so that callers need not see the filter header.
   double h = 0, noise_sigma = 0, mean_iterations = 0, p95_iterations = 0;
-  std::size_t kernels = 0, kernels_refitted = 0;
+  std::size_t kernels = 0, kernels_refitted = 0, kernels_split = 0;
   std::size_t unsupported = 0, off_surface = 0, low_density = 0, low_likelihood = 0, displaced = 0,
               small_components = 0, merged = 0, not_converged = 0;
   double s_scale = 0, s_kernels = 0, s_projection = 0, s_clustering = 0, s_outliers = 0,

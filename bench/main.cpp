@@ -121,6 +121,10 @@ int run(int argc, char** argv) {
   double refit_spread = -1;
   app.add_option("--refit-spread", refit_spread,
                  "quality and real suites: robust_filter's refit_spread (default: the library's)");
+  double crease_spread = -1;
+  app.add_option("--crease-spread", crease_spread,
+                 "quality and real suites: robust_filter's crease_spread (default: the "
+                 "library's; 0 = the split off)");
   // 0 (off) or K in [6, 200], for both orientation options.
   const CLI::Validator orient_range(
       [](std::string& s) {
@@ -179,6 +183,7 @@ int run(int argc, char** argv) {
   ctx.filter_only = filter_only;
   ctx.shape_names = shape_names;
   ctx.refit_spread = refit_spread;
+  ctx.crease_spread = crease_spread;
   ctx.orient_normals = orient_normals;
   ctx.cgal_orient_normals = cgal_orient_normals;
   ctx.scale_regions = scale_regions;

@@ -33,6 +33,7 @@ std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool 
     FilterSettings fs;
     fs.threads = threads;
     fs.refit_spread = ctx.refit_spread;
+    fs.crease_spread = ctx.crease_spread;
     fs.orient_k = ctx.orient_normals;
     fs.cgal_orient_k = ctx.cgal_orient_normals;
     fs.scale_regions = ctx.scale_regions;

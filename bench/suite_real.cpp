@@ -187,6 +187,7 @@ void run_real_suite(Context& ctx) {
   fs.merge = true;
   fs.threads = ctx.threads;
   fs.refit_spread = ctx.refit_spread;
+  fs.crease_spread = ctx.crease_spread;
   fs.orient_k = ctx.orient_normals;
   fs.cgal_orient_k = ctx.cgal_orient_normals;
   fs.scale_regions = ctx.scale_regions;
@@ -219,7 +220,8 @@ void run_real_suite(Context& ctx) {
       ", small components " + fmt_count(run.small_components) + "; " +
       fmt_pct(static_cast<double>(removed_inputs) / static_cast<double>(merged.size()), 2) +
       "); merged into other output points: " + fmt_count(run.merged) +
-      "; kernels refitted on their own plane: " + fmt_count(run.kernels_refitted) + " of " +
+      "; kernels split at creases: " + fmt_count(run.kernels_split) +
+      ", refitted on their own sheet: " + fmt_count(run.kernels_refitted) + ", of " +
       fmt_count(run.kernels) + ".");
   // The same without the normals of the scans' range grids (ConfOptions::scan_normals; the
   // filter then fits every kernel to all its neighbours, whichever way they face).

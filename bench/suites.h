@@ -28,6 +28,8 @@ struct Context {
   std::vector<std::string> shape_names;
   //! quality and real suites: FilterOptions::refit_spread (< 0: the library's default)
   double refit_spread = -1;
+  //! quality and real suites: FilterOptions::crease_spread (< 0: the library's default)
+  double crease_spread = -1;
   //! quality and real suites: FilterOptions::orient_k (FilterSettings::orient_k; 0: off)
   int orient_normals = 0;
   //! quality and real suites: CGAL's normals first (FilterSettings::cgal_orient_k; 0: off)

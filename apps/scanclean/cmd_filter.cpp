@@ -374,6 +374,8 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
                          (s.kernel_stride == 1
                               ? std::string(" (at every point)")
                               : " (at one point in " + std::to_string(s.kernel_stride) + ")"));
+  if (o.crease_spread > 0) sum.add_count("kernels split at creases", s.kernels_split);
+  if (o.refit_spread > 0) sum.add_count("kernels refitted on their sheet", s.kernels_refitted);
   sum.add("merge eps", s.merge_eps * 1000.0, 3, "mm");
   sum.add("iterations", std::to_string(s.mean_iterations).substr(0, 4) + " mean, " +
                             std::to_string(static_cast<int>(s.p95_iterations)) + " p95");

@@ -65,11 +65,19 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
                  "Drop points whose density is below tau x the median density (0 = off)")
       ->check(number_in(0, 1))
       ->capture_default_str();
+  cmd.add_option("--crease-spread", v->crease_spread,
+                 "Crease split: fit a kernel on its own face where two flat faces meet in a "
+                 "sharp edge within h (tested where its plane leaves more than this many noise "
+                 "sigma as spread), so edges stay sharp; automatic h, also tiled; 0 = off; 1.1 "
+                 "suits CAD parts and other sharp objects")
+      ->check(number_in(0, 100))
+      ->capture_default_str();
   cmd.add_option("--refit-spread", v->refit_spread,
-                 "Refit a kernel when its plane leaves more than this many noise sigma as spread: "
-                 "on its own face where two planes meet in a crease, on its own sheet where two "
-                 "sheets lie within h (automatic h, also tiled; 0 = off; 1.1 suits CAD parts, thin "
-                 "parts and sharp objects)")
+                 "Sheet refit: fit a kernel on its own sheet where two sheets lie within h "
+                 "(tested where its plane leaves more than this many noise sigma as spread), so "
+                 "thin parts stay apart; clouds without normals only (with normals the sheets "
+                 "are kept apart by them), automatic h, also tiled; 0 = off; 1.1 suits thin parts "
+                 "and detail finer than h")
       ->check(number_in(0, 100))
       ->capture_default_str();
   cmd.add_option("--outlier-sigma", v->outlier_sigma,
@@ -129,6 +137,7 @@ FilterCliValues values_of(const FilterOptions& o) {
   v.displacement_sigma = o.displacement_sigma;
   v.outlier_sigma = o.outlier_sigma;
   v.refit_spread = o.refit_spread;
+  v.crease_spread = o.crease_spread;
   v.tau = o.tau;
   v.passes = o.passes;
   v.k_min = o.k_min;
@@ -156,6 +165,7 @@ FilterOptions to_filter_options(const FilterCliValues& c) {
   o.displacement_sigma = c.displacement_sigma;
   o.outlier_sigma = c.outlier_sigma;
   o.refit_spread = c.refit_spread;
+  o.crease_spread = c.crease_spread;
   o.k_min = c.k_min;
   o.max_iterations = c.max_iterations;
   o.update = c.update == "vector" ? UpdateMode::kVector : UpdateMode::kNormal;

@@ -28,6 +28,7 @@ struct FilterCliValues {
   double displacement_sigma = FilterOptions{}.displacement_sigma;
   double outlier_sigma = FilterOptions{}.outlier_sigma;
   double refit_spread = FilterOptions{}.refit_spread;
+  double crease_spread = FilterOptions{}.crease_spread;
   std::string update = "normal";
   double merge_eps = -1;  //!< -1 = not given (automatic); the option itself refuses < 0
   double tau = FilterOptions{}.tau;

@@ -209,6 +209,8 @@ void note_report_filter([[maybe_unused]] const std::string& label,
                      {"low_density", s.low_density}, {"low_likelihood", s.low_likelihood},
                      {"displaced", s.displaced},     {"small_components", s.small_components}};
   j["kernels"] = s.kernels;
+  j["kernels_split"] = s.kernels_split;
+  j["kernels_refitted"] = s.kernels_refitted;
   j["kernel_stride"] = s.kernel_stride;
   j["h_m"] = s.h;
   j["h_min_m"] = s.h_min;

@@ -82,6 +82,7 @@ void validate(const FilterOptions& o) {
   check_real("displacement_sigma", o.displacement_sigma, 0, 100, false);
   check_real("outlier_sigma", o.outlier_sigma, 0, 100, false);
   check_real("refit_spread", o.refit_spread, 0, 100, false);
+  check_real("crease_spread", o.crease_spread, 0, 100, false);
   check_real("refit_noise_sigma", o.refit_noise_sigma, 0, 1e6, false);
   if (o.min_component_size > 1000000000ULL)
     bad_option("min_component_size", to_str(o.min_component_size),
@@ -94,6 +95,7 @@ FilterOptions depth_frame_options() {
   o.scale_gamma = 0;
   o.displacement_sigma = 0;
   o.refit_spread = 0;
+  o.crease_spread = 0;
   return o;
 }
 

@@ -231,6 +231,32 @@ std::size_t make_sse2(const Eigen::Vector3d* p, const std::uint32_t* js, std::si
   return make_impl(p, js, m, c, h2, inv_h2, out);
 }
 
+// sample_moments' sums: nine moments (x, y, z, xx, yy, zz, xy, xz, yz) in 8 float lanes each,
+// sample k in lane k mod 8 (the padding adds exact zeros); the same operations on every target.
+constexpr std::size_t kMoments = 9;
+[[gnu::always_inline]] inline void moments_impl(const FitSampleSet& q, V8f (&a)[kMoments]) {
+  for (V8f& v : a) v = V8f{};
+  const float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data();
+  for (std::size_t k = 0; k < q.n; k += 8) {
+    const V8f x = load8(px + k), y = load8(py + k), z = load8(pz + k);
+    a[0] += x;
+    a[1] += y;
+    a[2] += z;
+    a[3] += x * x;
+    a[4] += y * y;
+    a[5] += z * z;
+    a[6] += x * y;
+    a[7] += x * z;
+    a[8] += y * z;
+  }
+}
+SCANCLEAN_AVX2 void moments_avx2(const FitSampleSet& q, V8f (&a)[kMoments]) {
+  moments_impl(q, a);
+}
+void moments_sse2(const FitSampleSet& q, V8f (&a)[kMoments]) {
+  moments_impl(q, a);
+}
+
 bool have_avx2() {
 #if defined(__x86_64__)
   static const bool yes = __builtin_cpu_supports("avx2");
@@ -267,6 +293,32 @@ void FitSampleSet::assign(const FitSample* samples, std::size_t count) {
 
 void FitSampleSet::append_to(std::vector<FitSample>& out) const {
   for (std::size_t k = 0; k < n; ++k) out.push_back({x[k], y[k], z[k], t[k]});
+}
+
+SampleMoments sample_moments(const FitSampleSet& samples) {
+  V8f a[kMoments];
+  if (have_avx2())
+    moments_avx2(samples, a);
+  else
+    moments_sse2(samples, a);
+  double s[kMoments];
+  for (std::size_t m = 0; m < kMoments; ++m) {
+    s[m] = 0;
+    for (int l = 0; l < 8; ++l) s[m] += a[m][l];
+  }
+  SampleMoments out;
+  out.n = samples.n;
+  if (samples.n == 0) return out;
+  const double inv = 1.0 / static_cast<double>(samples.n);
+  out.mean = Eigen::Vector3d(s[0], s[1], s[2]) * inv;
+  const Eigen::Vector3d& m = out.mean;
+  out.cov(0, 0) = s[3] * inv - m.x() * m.x();
+  out.cov(1, 1) = s[4] * inv - m.y() * m.y();
+  out.cov(2, 2) = s[5] * inv - m.z() * m.z();
+  out.cov(0, 1) = out.cov(1, 0) = s[6] * inv - m.x() * m.y();
+  out.cov(0, 2) = out.cov(2, 0) = s[7] * inv - m.x() * m.z();
+  out.cov(1, 2) = out.cov(2, 1) = s[8] * inv - m.y() * m.z();
+  return out;
 }
 
 FitSums fit_sums(const FitSampleSet& samples) {

@@ -47,6 +47,16 @@ struct FitSampleSet {
   void append_to(std::vector<FitSample>& out) const;         //!< the n samples, in double
 };
 
+//! The unweighted moments of a fit's samples (every sample counted once): their count, mean
+//! and covariance (offsets as the samples', metres). Summed in float, eight partial sums per
+//! moment (sample k in partial k mod 8), combined in double.
+struct SampleMoments {
+  std::size_t n = 0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+};
+SampleMoments sample_moments(const FitSampleSet& samples);
+
 //! The weighted sums of the fit (eq. 2) over the samples, in double (the samples widened):
 //! sum t, sum t x, ..., sum t x x, ..., sum t x y, each product formed as (t x) y. Each sum is
 //! four partial sums (sample k in partial k mod 4, in sample order), combined as
@@ -121,27 +131,19 @@ inline Eigen::Vector3f kernel_normal(const KernelFit& fit, bool use_dir, bool or
   return use_dir && n.dot(vi) < 0 ? Eigen::Vector3f(-n) : n;
 }
 
-//! The robust weighted PCA of the neighbours of point i of d within h. `visit(g)` must call g(j)
-//! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
-//! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
-//! normal is the sensor normal (d.v_orients_only: the PCA normal turned to agree with it);
-//! otherwise it is the PCA normal, and with `oriented` in a cloud with sensor normals (a point
-//! that has none of its own) turned to the side the sum of its neighbours' sensor normals
-//! faces. Returns false if fewer than
-//! k_min neighbours remain. `untrimmed` (optional) receives the neighbours as gathered, before
-//! trimming (for the own-plane refit, plane_refit.h).
+//! The neighbours of point i of d within h as fit samples, in `set` (padded). `visit(g)` must
+//! call g(j) for a superset of the neighbours (indices into d). With `oriented` and a sensor
+//! normal at i, only neighbours whose sensor normals agree with it (dot > 0.5). `around`
+//! (optional) receives the sum of the sensor normals of the neighbours taken.
 template <class Visit>
-bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool oriented,
-                double eigen_floor, Visit&& visit, KernelFit& out,
-                std::vector<FitSample>* untrimmed = nullptr) {
-  if (!(h > 0)) return false;
+void gather_samples(const PointSet& d, std::size_t i, double h, bool oriented, Visit&& visit,
+                    FitSampleSet& set, Eigen::Vector3f* around = nullptr) {
   const Eigen::Vector3d pi = d.p[i];
   const double h2 = h * h, inv_h2 = 1.0 / h2;
   const bool use_dir = oriented && d.has_v(i);
   const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
   // The neighbours go to a buffer that only grows; their indices are made into samples a block
   // at a time (make_samples).
-  thread_local FitSampleSet set;
   set.n = 0;
   constexpr std::size_t kBlock = 64;
   std::uint32_t js[kBlock];
@@ -151,23 +153,48 @@ bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool orie
     make_samples(d.p.data(), js, m, pi, h2, inv_h2, set);
     m = 0;
   };
-  // A point without a sensor normal in a cloud that has them (a scan's border, a hole's edge):
-  // its PCA normal takes the side its neighbours' sensor normals face.
-  const bool orient_by_neighbours = oriented && !use_dir && !d.v.empty();
-  Eigen::Vector3f around = Eigen::Vector3f::Zero();
+  const bool sum_normals = around && !d.v.empty();
+  if (around) *around = Eigen::Vector3f::Zero();
   visit([&](std::size_t j) {
     // With sensor normals, only the neighbours facing the same way.
     if (use_dir && !(d.v[j].dot(vi) > 0.5f)) return;
-    if (orient_by_neighbours) around += d.v[j];
+    if (sum_normals) *around += d.v[j];
     js[m++] = static_cast<std::uint32_t>(j);
     if (m == kBlock) flush();
   });
   flush();
+  set.pad();
+}
+
+//! The robust weighted PCA of the neighbours of point i of d within h. `visit(g)` must call g(j)
+//! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
+//! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
+//! normal is the sensor normal (d.v_orients_only: the PCA normal turned to agree with it);
+//! otherwise it is the PCA normal, and with `oriented` in a cloud with sensor normals (a point
+//! that has none of its own) turned to the side the sum of its neighbours' sensor normals
+//! faces. Returns false if fewer than
+//! k_min neighbours remain. `untrimmed` (optional) receives the neighbours as gathered, before
+//! trimming (for the own-plane refit, plane_refit.h); `moments` (optional) their unweighted
+//! moments (for the crease split's first test).
+template <class Visit>
+bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool oriented,
+                double eigen_floor, Visit&& visit, KernelFit& out,
+                std::vector<FitSample>* untrimmed = nullptr, SampleMoments* moments = nullptr) {
+  if (!(h > 0)) return false;
+  const bool use_dir = oriented && d.has_v(i);
+  const Eigen::Vector3f vi = use_dir ? d.v[i] : Eigen::Vector3f::Zero();
+  thread_local FitSampleSet set;
+  // A point without a sensor normal in a cloud that has them (a scan's border, a hole's edge):
+  // its PCA normal takes the side its neighbours' sensor normals face.
+  const bool orient_by_neighbours = oriented && !use_dir && !d.v.empty();
+  Eigen::Vector3f around = Eigen::Vector3f::Zero();
+  gather_samples(d, i, h, oriented, visit, set, orient_by_neighbours ? &around : nullptr);
   if (untrimmed) {
     untrimmed->clear();
     set.append_to(*untrimmed);
   }
-  if (!fit_samples(set, pi, h, k_min, eigen_floor, out)) return false;
+  if (moments) *moments = sample_moments(set);
+  if (!fit_samples(set, d.p[i], h, k_min, eigen_floor, out)) return false;
   out.n = kernel_normal(out, use_dir, d.v_orients_only, vi);
   if (orient_by_neighbours && out.n.dot(around) < 0) out.n = -out.n;
   return true;

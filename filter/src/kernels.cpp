@@ -46,9 +46,11 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   PlaneRefit refit;
   refit.sigma = prm.noise_sigma;
   refit.ratio = o.refit_spread;
+  refit.crease_ratio = o.crease_spread;
   refit.k_min = o.k_min;
   refit.eigen_floor = o.eigen_floor;
-  std::vector<std::uint8_t> refitted(refit.active() ? nk : 0, 0);
+  // Per kernel candidate: 1 refitted on its own sheet, 2 split at a crease.
+  std::vector<std::uint8_t> refitted(refit.sheets() || refit.creases() ? nk : 0, 0);
   const std::uint64_t cell_key = new_cell_cache_key();
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     // d is in grid order: a spatially even subsample
@@ -65,19 +67,38 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
       else
         idx.for_each_within(qi, static_cast<float>(h * 1.0001), cb);
     };
-    // With the refit on, the neighbours are also kept untrimmed, for it.
+    // With the sheet refit on, most kernels on noisy data ask for it: the neighbours are kept
+    // untrimmed from the gather. The crease split alone first tests their unweighted moments
+    // (bends_away) and gathers them again only where that passes (few kernels).
     thread_local std::vector<FitSample> gathered;
+    SampleMoments moments;
+    // With measured sensor normals the fits already leave out the neighbours facing away (the
+    // other sheet of a thin part); a second layer facing the same way is the same surface seen
+    // twice (scans registered a fraction of a millimetre apart), which the kernel should
+    // average: no sheet refit. Normals that only orient (estimated, orient_k) can miss a thin
+    // part's other sheet: the refit stays.
+    const bool keep = refit.sheets() && !(prm.oriented && !d.v_orients_only);
     const bool ok = fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, visit, fit,
-                               refit.active() ? &gathered : nullptr);
+                               keep ? &gathered : nullptr, refit.creases() ? &moments : nullptr);
     if (!ok) return;
-    if (wants_refit(fit, refit)) {
-      if (split_crease(gathered, d.p[i], refit, fit) ||
-          refit_own_plane(gathered, d.p[i], h, refit, fit)) {
-        refitted[candidate(i)] = 1;
-        const bool use_dir = prm.oriented && d.has_v(i);
-        fit.n = kernel_normal(fit, use_dir, d.v_orients_only,
-                              use_dir ? d.v[i] : Eigen::Vector3f::Zero());
+    const bool use_dir = prm.oriented && d.has_v(i);
+    std::uint8_t how = 0;
+    if (wants_split(fit, refit) && bends_away(moments, fit)) {
+      if (!keep) {
+        thread_local FitSampleSet again;
+        gather_samples(d, i, h, prm.oriented, visit, again);
+        gathered.clear();
+        again.append_to(gathered);
       }
+      if (split_crease(gathered, d.p[i], refit, fit)) how = 2;
+    }
+    if (how == 0 && keep && wants_refit(fit, refit) &&
+        refit_own_plane(gathered, d.p[i], h, refit, fit))
+      how = 1;
+    if (how != 0) {
+      refitted[candidate(i)] = how;
+      fit.n =
+          kernel_normal(fit, use_dir, d.v_orients_only, use_dir ? d.v[i] : Eigen::Vector3f::Zero());
     }
     nref[i] = fit.n;
     if (prm.support) (*prm.support)[i] = static_cast<float>(fit.weight - 1.0);
@@ -96,7 +117,10 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   std::vector<std::uint32_t>().swap(slot);
   KernelSet ks;
   for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
-  for (std::uint8_t r : refitted) ks.refitted += r;
+  for (std::uint8_t r : refitted) {
+    ks.refitted += r == 1 ? 1 : 0;
+    ks.split += r == 2 ? 1 : 0;
+  }
   // Compact the valid kernels (in place, with their fits), index their centres, then permute
   // the records in place into the index's slot order, cycle by cycle (no second copy: memory).
   std::size_t m = 0;

@@ -24,7 +24,8 @@ struct KernelSet {
   std::vector<KernelRecord> records;     //!< one per slot of index
   std::vector<KernelFitRecord> fits;     //!< one per slot, when kept (KernelParams::keep_fits)
   std::size_t fitted = 0;                //!< points that got a kernel (including w = 0)
-  std::size_t refitted = 0;              //!< kernels refitted on their own plane (plane_refit.h)
+  std::size_t refitted = 0;              //!< kernels refitted on their own sheet (plane_refit.h)
+  std::size_t split = 0;                 //!< kernels fitted on their own face of a crease
 };
 
 struct KernelParams {

@@ -90,36 +90,45 @@ Moments moments(const std::vector<FitSample>& s, bool chi_weighted, Keep&& keep)
   return mo;
 }
 
-// The plane of the samples k with keep(k), every sample counted once (not by its chi weight,
-// which would let the blurred apex near the centre flatten the wedge); false with fewer than
-// k_min samples.
-template <class Keep>
-bool fit_plane(const std::vector<FitSample>& s, int k_min, Keep&& keep, SidePlane& out) {
-  const Moments mo = moments(s, false, keep);
-  if (mo.count < std::max(3, k_min)) return false;
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(mo.c);
-  out.m = mo.m;
+// Unweighted sums of samples (each counted once) and the chi weights they carry: one pass feeds
+// a plane per side.
+struct PlaneSums {
+  double count = 0, chi = 0;
+  Eigen::Vector3d s = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d ss = Eigen::Matrix3d::Zero();
+  void add(const FitSample& q) {
+    const Eigen::Vector3d x(q.x, q.y, q.z);
+    count += 1;
+    chi += q.t;
+    s += x;
+    ss.noalias() += x * x.transpose();
+  }
+};
+
+// The plane of the summed samples (every sample counted once, not by its chi weight, which would
+// let the blurred apex near the centre flatten the wedge), with the mean squared residual it
+// leaves (its smallest eigenvalue); false with fewer than k_min samples. The offsets are within
+// h of the centre point, so the covariance from the raw sums loses nothing that matters in
+// double.
+bool plane_of(const PlaneSums& sums, int k_min, SidePlane& out, double* r2 = nullptr) {
+  if (sums.count < std::max(3, k_min)) return false;
+  const Eigen::Vector3d m = sums.s / sums.count;
+  const Eigen::Matrix3d c = sums.ss / sums.count - m * m.transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(c);
+  out.m = m;
   out.n = es.eigenvectors().col(0);
-  out.weight = mo.chi;
-  out.count = mo.count;
+  out.weight = sums.chi;
+  out.count = static_cast<int>(sums.count);
+  if (r2) *r2 = std::max(0.0, es.eigenvalues()(0));
   return true;
 }
 
-// fit_plane on the samples with side[k] == want.
-bool fit_side(const std::vector<FitSample>& s, const std::vector<std::uint8_t>& side,
-              std::uint8_t want, int k_min, SidePlane& out) {
-  return fit_plane(
-      s, k_min, [&](std::size_t k) { return side[k] == want; }, out);
-}
-
-// The mean squared residual of the samples from one plane (every sample counted once).
-double residual(const std::vector<FitSample>& s, const SidePlane& plane) {
-  double sum = 0;
-  for (const FitSample& q : s) {
-    const double r = plane.n.dot(Eigen::Vector3d(q.x, q.y, q.z) - plane.m);
-    sum += r * r;
-  }
-  return sum / static_cast<double>(s.size());
+// plane_of on every sample.
+bool fit_plane(const std::vector<FitSample>& s, int k_min, SidePlane& out, double* r2 = nullptr) {
+  PlaneSums sums;
+  for (const FitSample& q : s) sums.add(q);
+  return plane_of(sums, k_min, out, r2);
 }
 
 struct Wedge {
@@ -133,16 +142,20 @@ struct Wedge {
 
 // One wedge fit: the samples split by the plane through their centroid m0 normal to u, then
 // kCreaseRounds rounds of (a plane per side; the samples given to the sides by the plane through
-// the two planes' line that separates the sides' centroids). `side` receives the last split.
+// the two planes' line that separates the sides' centroids), stopping early once no sample
+// changes sides (the next round would repeat this one). `side` receives the last split.
 // Returns false where the wedge degenerates (a side too small, the planes parallel).
 bool fit_wedge(const std::vector<FitSample>& s, const Eigen::Vector3d& m0, const Eigen::Vector3d& u,
                int k_min, std::vector<std::uint8_t>& side, Wedge& w) {
   const std::size_t ns = s.size();
-  for (std::size_t k = 0; k < ns; ++k)
+  PlaneSums sums[2];
+  for (std::size_t k = 0; k < ns; ++k) {
     side[k] = (Eigen::Vector3d(s[k].x, s[k].y, s[k].z) - m0).dot(u) > 0 ? 1 : 0;
+    sums[side[k]].add(s[k]);
+  }
   for (int round = 0; round < kCreaseRounds; ++round) {
     SidePlane(&pl)[2] = w.plane;
-    if (!fit_side(s, side, 0, k_min, pl[0]) || !fit_side(s, side, 1, k_min, pl[1])) return false;
+    if (!plane_of(sums[0], k_min, pl[0]) || !plane_of(sums[1], k_min, pl[1])) return false;
     const Eigen::Vector3d line = pl[0].n.cross(pl[1].n);
     if (!(line.squaredNorm() > 1e-6)) return false;
     Eigen::Matrix3d a;
@@ -157,16 +170,47 @@ bool fit_wedge(const std::vector<FitSample>& s, const Eigen::Vector3d& m0, const
     const Eigen::Vector3d b2 = (pl[0].n + pl[1].n).normalized();
     if (std::abs(b2.dot(gap)) > std::abs(w.b.dot(gap))) w.b = b2;
     if (w.b.dot(pl[1].m - w.p) < 0) w.b = -w.b;
+    // The new split, its residual from the planes, and the next round's sums, in one pass.
     double sum = 0;
+    std::size_t moved = 0;
+    sums[0] = sums[1] = PlaneSums();
     for (std::size_t k = 0; k < ns; ++k) {
       const Eigen::Vector3d q(s[k].x, s[k].y, s[k].z);
-      side[k] = w.side_of(q);
-      const double r = pl[side[k]].n.dot(q - pl[side[k]].m);
+      const std::uint8_t now = w.side_of(q);
+      moved += now != side[k] ? 1 : 0;
+      side[k] = now;
+      const double r = pl[now].n.dot(q - pl[now].m);
       sum += r * r;
+      sums[now].add(s[k]);
     }
     w.r2 = sum / static_cast<double>(ns);
+    if (moved == 0) break;
   }
   return true;
+}
+
+// How much more of the samples' mean squared residual from `plane` a parabola across the line
+// (along v, in the plane) explains than a line does: about sigma^2 / count on a flat face, the
+// bend's own share on an arc.
+double bend_across(const std::vector<FitSample>& s, const SidePlane& plane,
+                   const Eigen::Vector3d& v) {
+  Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  double rr = 0;
+  for (const FitSample& q : s) {
+    const Eigen::Vector3d x = Eigen::Vector3d(q.x, q.y, q.z) - plane.m;
+    const double t = v.dot(x), r = plane.n.dot(x);
+    const Eigen::Vector3d f(1, t, t * t);
+    a.noalias() += f * f.transpose();
+    b += r * f;
+    rr += r * r;
+  }
+  // The residual sums of squares of the least-squares fits: rr - b^T A^-1 b.
+  const Eigen::Matrix2d a2 = a.topLeftCorner<2, 2>();
+  const Eigen::Vector2d b2 = b.head<2>();
+  const double line = rr - b2.dot(a2.ldlt().solve(b2));
+  const double parabola = rr - b.dot(a.ldlt().solve(b));
+  return (line - parabola) / static_cast<double>(s.size());
 }
 
 }  // namespace
@@ -174,15 +218,15 @@ bool fit_wedge(const std::vector<FitSample>& s, const Eigen::Vector3d& m0, const
 bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
                   const PlaneRefit& prm, KernelFit& fit) {
   const std::size_t ns = samples.size();
-  if (!wants_refit(fit, prm) || ns < 2 * static_cast<std::size_t>(prm.k_min)) return false;
+  if (!wants_split(fit, prm) || ns < 2 * static_cast<std::size_t>(prm.k_min)) return false;
   double total = 0;
   for (const FitSample& q : samples) total += q.t;
   const auto all = [](std::size_t) { return true; };
   thread_local std::vector<std::uint8_t> side;
   side.resize(ns);
   SidePlane one;
-  if (!fit_plane(samples, prm.k_min, all, one)) return false;
-  const double r2_one = residual(samples, one);
+  double r2_one = 0;  // the mean squared residual the single plane leaves
+  if (!fit_plane(samples, prm.k_min, one, &r2_one)) return false;
   // Where the plane leaves the samples alike not much more than it leaves them weighted by chi,
   // nothing bends away from it towards the rim of the ball: no crease (a cheap test first; at
   // 2-3 % noise most kernels' spread asks for the refit).
@@ -232,8 +276,13 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   const Eigen::Matrix3d& c = mo.c;
   // The side's plane again, on the selection (without the samples near the line).
   SidePlane own_plane;
-  if (!fit_plane(sel, prm.k_min, all, own_plane)) return false;
+  if (!fit_plane(sel, prm.k_min, own_plane)) return false;
   const Eigen::Vector3d n = own_plane.n;
+  // The face must be flat across the line: a rounded edge's or a tube's is an arc.
+  Eigen::Vector3d across = v - n.dot(v) * n;
+  if (!(across.squaredNorm() > 1e-12)) return false;
+  across.normalize();
+  if (!(bend_across(sel, own_plane, across) < kCreaseFlat * prm.sigma * prm.sigma)) return false;
   const Eigen::Vector3d t1 = n.unitOrthogonal(), t2 = n.cross(t1);
   Eigen::Matrix2d c2;
   c2 << t1.dot(c * t1), t1.dot(c * t2), t2.dot(c * t1), t2.dot(c * t2);
@@ -251,6 +300,18 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   trial.n = fit.n;  // the caller's (a sensor normal stays)
   fit = trial;
   return true;
+}
+
+bool bends_away(const SampleMoments& moments, const KernelFit& fit) {
+  if (moments.n < 3) return false;
+  const double limit = kCreaseBend * fit.lambda[0];
+  // The smallest eigenvalue is at most the variance along any direction: along the fit's normal
+  // first (no eigensolver for most kernels).
+  const Eigen::Vector3d n = fit.e.col(0);
+  if (!(n.dot(moments.cov * n) > limit)) return false;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(moments.cov, Eigen::EigenvaluesOnly);
+  return es.eigenvalues()(0) > limit;
 }
 
 }  // namespace scanclean::detail

@@ -292,6 +292,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   std::vector<Eigen::Vector3d> x = std::move(d.p);  // projected positions, initially the input
   st.kernels = ks.fitted;
   st.kernels_refitted = ks.refitted;
+  st.kernels_split = ks.split;
   st.seconds_kernels += seconds_since(t);
 
   // 3. Projection, after the density test on each point's own kernel support and, point by

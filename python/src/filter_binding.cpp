@@ -53,6 +53,7 @@ py::dict options_to_dict(const FilterOptions& o) {
   d["displacement_sigma"] = o.displacement_sigma;
   d["outlier_sigma"] = o.outlier_sigma;
   d["refit_spread"] = o.refit_spread;
+  d["crease_spread"] = o.crease_spread;
   d["refit_noise_sigma"] = o.refit_noise_sigma;
   d["remove_small_components"] = o.remove_small_components;
   d["min_component_size"] = o.min_component_size;
@@ -149,6 +150,8 @@ FilterOptions options_from_kwargs(const py::kwargs& kw) {
       o.outlier_sigma = as<double>(v, k);
     else if (k == "refit_spread")
       o.refit_spread = as<double>(v, k);
+    else if (k == "crease_spread")
+      o.crease_spread = as<double>(v, k);
     else if (k == "refit_noise_sigma")
       o.refit_noise_sigma = as<double>(v, k);
     else if (k == "remove_small_components")
@@ -207,6 +210,7 @@ py::dict stats_to_dict(const FilterStats& s) {
   d["merged"] = s.merged;
   d["kernels"] = s.kernels;
   d["kernels_refitted"] = s.kernels_refitted;
+  d["kernels_split"] = s.kernels_split;
   d["h"] = s.h;
   d["h_min"] = s.h_min;
   d["h_max"] = s.h_max;

@@ -151,6 +151,30 @@ TEST(KernelFitTest, VectorSumsEqualTheScalarLoopBitForBit) {
   }
 }
 
+TEST(KernelFitTest, SampleMomentsMatchTheDirectUnweightedMoments) {
+  // The crease split's first test reads the unweighted mean and covariance of the samples,
+  // summed in float lanes: against the same moments summed in double, one sample at a time.
+  for (const int n : {1, 7, 8, 9, 250, 1100}) {
+    const std::vector<FitSample> s = plane_samples(n, 0.5, 0.02, 17);
+    const SampleMoments m = sample_moments(set_of(s));
+    ASSERT_EQ(m.n, static_cast<std::size_t>(n));
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const FitSample& q : s) mean += Eigen::Vector3d(q.x, q.y, q.z);
+    mean /= n;
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const FitSample& q : s) {
+      const Eigen::Vector3d r = Eigen::Vector3d(q.x, q.y, q.z) - mean;
+      cov += r * r.transpose();
+    }
+    cov /= n;
+    EXPECT_LT((m.mean - mean).norm(), 1e-6 * 0.5) << n;
+    // Float sums of squares: within 1e-5 of the largest variance (0.5^2 / 3 in the plane).
+    EXPECT_LT((m.cov - cov).cwiseAbs().maxCoeff(), 1e-5 * 0.25 / 3) << n;
+    EXPECT_EQ(m.cov, m.cov.transpose());
+  }
+  EXPECT_EQ(sample_moments(FitSampleSet{}).n, 0u);
+}
+
 TEST(KernelFitTest, SmallestEigenpairMatchesTheIterativeSolver) {
   // Covariances of planar neighbourhoods (as the kernels see) and of general shapes, rotated at
   // random: the smallest eigenvalue and its vector as Eigen's QR-based solver finds them.

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "../../filter/src/kernel_fit.h"
@@ -43,6 +44,7 @@ PlaneRefit refit_options() {
   PlaneRefit r;
   r.sigma = kSigma;
   r.ratio = 1.5;
+  r.crease_ratio = 1.5;
   return r;
 }
 
@@ -133,6 +135,7 @@ PlaneRefit noisy_refit_options() {
   PlaneRefit r;
   r.sigma = 0.13;
   r.ratio = 1.1;
+  r.crease_ratio = 1.1;
   return r;
 }
 
@@ -221,16 +224,90 @@ TEST(PlaneRefitTest, TheCreaseSplitLeavesASurfaceBentWithinHAlone) {
   ASSERT_TRUE(fit_samples(copy, Eigen::Vector3d::Zero(), kH, 8, 0.05, fit));
   PlaneRefit prm;
   prm.sigma = kNoise;
-  prm.ratio = 1.1;
-  ASSERT_TRUE(wants_refit(fit, prm));  // the bend makes the plane's spread large
+  prm.crease_ratio = 1.1;
+  ASSERT_TRUE(wants_split(fit, prm));  // the bend makes the plane's spread large
   KernelFit kept = fit;
   EXPECT_FALSE(split_crease(nb, Eigen::Vector3d::Zero(), prm, kept));
   EXPECT_EQ(kept.m, fit.m);
   // With a noise estimate four times as large the same wedge passes: it is the spread test
   // that rejects it.
   prm.sigma = 4 * kNoise;
-  prm.ratio = 0.1;
+  prm.crease_ratio = 0.1;
   EXPECT_TRUE(split_crease(nb, Eigen::Vector3d::Zero(), prm, fit));
+}
+
+// Samples around a centre point on face A (z = 0, x < 0) of a 90-degree edge along y whose
+// face B is x = 0, z < 0; the edge rounded with radius rho (0: sharp). The centre point at
+// x = -c. Noise along the profile's normal (seeded).
+std::vector<FitSample> edge_samples(double rho, double c, double sigma, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  const double len_a = 2.0, len_arc = 0.5 * M_PI * rho, len_b = 2.0;
+  std::uniform_real_distribution<double> u(0.0, len_a + len_arc + len_b), uy(-kH, kH);
+  std::normal_distribution<double> g(0.0, sigma);
+  std::vector<FitSample> out;
+  while (out.size() < 1500) {
+    const double s = u(rng), y = uy(rng), e = g(rng);
+    Eigen::Vector2d p, n;  // in the xz profile
+    if (s < len_a) {
+      p = Eigen::Vector2d(-rho - (len_a - s), 0);
+      n = Eigen::Vector2d(0, 1);
+    } else if (s < len_a + len_arc) {
+      const double a = (s - len_a) / std::max(rho, 1e-12);  // from +z towards +x
+      n = Eigen::Vector2d(std::sin(a), std::cos(a));
+      p = Eigen::Vector2d(-rho, -rho) + rho * n;
+    } else {
+      p = Eigen::Vector2d(0, -rho - (s - len_a - len_arc));
+      n = Eigen::Vector2d(1, 0);
+    }
+    p += e * n;
+    const Eigen::Vector3d q(p.x() + c, y, p.y());
+    const double r2 = q.squaredNorm();
+    if (!(r2 < kH * kH)) continue;
+    double t = 1.0 - r2 / (kH * kH);
+    t *= t;
+    out.push_back({q.x(), q.y(), q.z(), t * t});
+  }
+  return out;
+}
+
+// The split at an edge rounded with radius rho, noise sigma (both in h), the centre point 0.3 h
+// from the edge on face A: whether it split, and the kernel's tilt from face A's normal.
+std::pair<bool, double> split_at_edge(double rho, double sigma) {
+  const std::vector<FitSample> nb = edge_samples(rho, 0.3, sigma, 7);
+  std::vector<FitSample> copy = nb;
+  KernelFit fit;
+  EXPECT_TRUE(fit_samples(copy, Eigen::Vector3d::Zero(), kH, 8, 0.05, fit));
+  EXPECT_GT(tilt_from_z(fit), 0.15);  // blended: tilted by more than 8 degrees
+  PlaneRefit prm;
+  prm.sigma = sigma;
+  prm.crease_ratio = 1.1;
+  EXPECT_TRUE(wants_split(fit, prm));
+  const bool split = split_crease(nb, Eigen::Vector3d::Zero(), prm, fit);
+  return {split, tilt_from_z(fit)};
+}
+
+TEST(PlaneRefitTest, TheCreaseSplitTakesSharpEdgesAndLeavesRoundedOnes) {
+  // Sharp, and rounded with radius 0.05 h (within a few noise sigma): split, the kernel on
+  // face A (within 1 degree).
+  for (const double rho : {0.0, 0.05}) {
+    const auto [split, tilt] = split_at_edge(rho, 0.02);
+    EXPECT_TRUE(split) << rho;
+    EXPECT_LT(tilt, 0.0175) << rho;
+  }
+  // Rounded with radius 0.3 h: two planes explain the samples to the noise (the wedge passes
+  // the residual test at this noise), but face A's samples near the line follow the arc: no
+  // split, the blended kernel left as it was.
+  {
+    const auto [split, tilt] = split_at_edge(0.3, 0.02);
+    EXPECT_FALSE(split);
+    EXPECT_GT(tilt, 0.15);
+  }
+  // At 2.5 times the noise the same rounding is lost in it: split.
+  {
+    const auto [split, tilt] = split_at_edge(0.3, 0.05);
+    EXPECT_TRUE(split);
+    EXPECT_LT(tilt, 0.05);
+  }
 }
 
 }  // namespace

@@ -157,9 +157,11 @@ TEST(TiledFilter, GlobalScaleFromTheFirstPassMatchesTheInMemoryFilter) {
 TEST(TiledFilter, ManyTilesGiveTheInMemoryResultUpToTheStatedDifferences) {
   const PointCloud c = scene(5);
   // Kernels at every point, so that the kernel stride's subsample is not one of the
-  // differences; h as the tiled run's first pass chooses it.
+  // differences; h as the tiled run's first pass chooses it. With the crease split, which needs
+  // the whole cloud's noise estimate in the tiles (refit_noise_sigma).
   FilterOptions o;
   o.kernel_stride = 1;
+  o.crease_spread = 1.1;
   const Tiled tiled = run_tiled(c, o, 14000);
   EXPECT_GE(tiled.stats.tiles, 8u);
   EXPECT_EQ(tiled.sink_calls, tiled.stats.tiles);
@@ -170,7 +172,9 @@ TEST(TiledFilter, ManyTilesGiveTheInMemoryResultUpToTheStatedDifferences) {
   fixed.scale = ScaleMode::kFixed;
   fixed.h = tiled.stats.globals.h;
   fixed.merge_eps = tiled.stats.globals.merge_eps;
+  fixed.refit_noise_sigma = tiled.stats.globals.noise_sigma;  // the crease split's, as the tiles'
   const FilterResult mem = robust_filter(c, fixed);
+  EXPECT_GT(mem.stats.kernels_split, 0u);
 
   const Diff d = compare(mem, tiled, fixed.h);
   const std::size_t only_one = d.only_one, outlier_diff = d.outlier_diff,
@@ -187,14 +191,16 @@ TEST(TiledFilter, ManyTilesGiveTheInMemoryResultUpToTheStatedDifferences) {
 }
 
 TEST(TiledFilter, TheRefitActsInTilesAsInMemory) {
-  // The half-spheres meet the floor at a crease: the refit acts there. The tiles run with the
-  // whole cloud's h fixed and get its noise estimate for the refit (refit_noise_sigma); against
-  // the in-memory run with the same options (automatic h, its own estimate). Kernels at every
-  // 2nd point, as in the test below (it states what else differs), keep the test short.
+  // The half-spheres meet the floor at a crease: the sheet refit acts there (and the crease
+  // split at a few kernels). The tiles run with the whole cloud's h fixed and get
+  // its noise estimate for both (refit_noise_sigma); against the in-memory run with the same
+  // options (automatic h, its own estimate). Kernels at every 2nd point, as in the test below (it
+  // states what else differs), keep the test short.
   const PointCloud c = scene(5);
   FilterOptions o;
   o.kernel_stride = 2;
   o.refit_spread = 1.1;
+  o.crease_spread = 1.1;
   const Tiled tiled = run_tiled(c, o, 14000);
   const FilterResult mem = robust_filter(c, o);
   EXPECT_GT(mem.stats.kernels_refitted, 100u);
@@ -202,17 +208,20 @@ TEST(TiledFilter, TheRefitActsInTilesAsInMemory) {
   const double h = mem.stats.h;
   const Diff d = compare(mem, tiled, h);
   expect_agreement_at_stride(d, c.size(), h);
-  // The tiles did refit: their output is not the one without the refit.
+  // The tiles did split and refit: their output is not the one without either.
   FilterOptions plain = o;
   plain.refit_spread = 0;
+  plain.crease_spread = 0;
   const Diff p = compare(robust_filter(c, plain), tiled, h);
   EXPECT_GT(p.moved, 100u);
   EXPECT_GT(p.largest, 1e-3 * h);
-  // A fixed h has no noise estimate of its own: without refit_noise_sigma, no refit.
+  // A fixed h has no noise estimate of its own: without refit_noise_sigma, neither acts.
   FilterOptions fixed = o;
   fixed.scale = ScaleMode::kFixed;
   fixed.h = h;
-  EXPECT_EQ(robust_filter(c, fixed).stats.kernels_refitted, 0u);
+  const FilterResult f = robust_filter(c, fixed);
+  EXPECT_EQ(f.stats.kernels_refitted, 0u);
+  EXPECT_EQ(f.stats.kernels_split, 0u);
 }
 
 TEST(TiledFilter, KernelStrideTakesTheWholeCloudsSubsampleInEveryTile) {

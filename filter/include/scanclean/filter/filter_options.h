@@ -118,29 +118,33 @@ struct FilterOptions {
   //! would otherwise carry onto it; without leaving them out, a point's own kernel, and in pairs
   //! and clumps of outliers each other's, pulled towards them by their weights, would vouch.
   double outlier_sigma = 4.0;
-  //! Own-plane refit of the kernels (kAuto, or a fixed h with refit_noise_sigma: it needs the
+  //! Crease split of the kernels (kAuto, or a fixed h with refit_noise_sigma: it needs the
   //! noise sigma), [0, 100]; 0 = off. A kernel whose plane leaves a residual spread
-  //! sqrt(lambda_3) above refit_spread x the cloud's noise sigma (two sheets of a thin part
-  //! within h, a sharp crease, detail finer than h) is refitted so that it describes its own
-  //! sheet or its own side of the crease; the projection's truncation then keeps the other
-  //! side's kernels from pulling points across. First the crease split: where a wedge (two
-  //! planes more than 25 degrees apart) explains the neighbours to the noise and far better
-  //! than one plane, the kernel is refitted on its own point's face, away from the crease line;
-  //! it works at 2-3 % noise, where the band of the sheet refit holds both faces. Else the sheet
-  //! refit: the neighbours within 3 sigma of the plane through its own point (kept when those
-  //! left out hold at least 10 % of its weight). 1.1 is the recommended value for CAD parts,
-  //! thin parts and scans of sharp objects: on the benchmark's shapes at the known limits it
-  //! lowered CD by up to 22 % (sharp box, 50k points, 3 % noise); on the protocol's smooth
-  //! shapes CD moved by -7 to +1.7 % (the bunny mesh better, a torus and a rounded box at 10k
-  //! points up to 1.7 % worse); on the merged bunny scans it lowered the 95th percentile
-  //! distance but raised the mean and RMS slightly, because it also keeps misregistered scan
-  //! layers apart (README, "Shapes at the known limits"). Off by default for that reason: the
-  //! defaults must not move the real scans farther from the reference.
+  //! sqrt(lambda_3) above crease_spread x the cloud's noise sigma, and whose neighbours bend
+  //! away from its plane towards the rim of its ball, is tested for a crease: where a wedge (two
+  //! planes more than 25 degrees apart) explains its neighbours to the noise and far better than
+  //! one plane, and its own point's face is flat across the line, it is refitted on that face,
+  //! away from the line. The projection's truncation then keeps the other face's kernels from
+  //! rounding the edge. 1.1 is the recommended value for CAD parts and other objects with sharp
+  //! edges. Off by default: on the smooth protocol shapes and the real scans the benchmark
+  //! measures it moved the figures by up to 2 % either way and took 40-60 % longer on the merged
+  //! bunny scans (README, "Shapes at the known limits").
+  double crease_spread = 0;
+  //! Sheet refit of the kernels (kAuto, or a fixed h with refit_noise_sigma), [0, 100]; 0 = off.
+  //! A kernel whose plane leaves a residual spread sqrt(lambda_3) above refit_spread x the
+  //! cloud's noise sigma and that the crease split left alone (two sheets of a thin part within
+  //! h, detail finer than h) is refitted on the neighbours within 3 sigma of the plane through
+  //! its own point (kept when those left out hold at least 10 % of its weight), so that it
+  //! describes its own sheet. Only in clouds without sensor normals: with them the kernels
+  //! already leave out the neighbours facing away (the other sheet of a thin part), and the
+  //! refit took the merged bunny scans' overlapping layers (one surface seen twice, registered a
+  //! fraction of a millimetre apart) for sheets. 1.1 suits thin parts and detail finer than h.
+  //! Off by default: it costs the 1M noisy sphere's kernels phase about as much again.
   double refit_spread = 0;
-  //! The noise sigma (metres) the refit compares against where h is not automatic, [0, 1e6];
-  //! 0 = none (the refit is then off with a fixed or adaptive h). The tiled filter, whose tiles
-  //! run with the whole cloud's h fixed, passes them the whole cloud's estimate here, so that a
-  //! tiled run refits as the in-memory run does.
+  //! The noise sigma (metres) the crease split and the sheet refit compare against where h is
+  //! not automatic, [0, 1e6]; 0 = none (both are then off with a fixed or adaptive h). The tiled
+  //! filter, whose tiles run with the whole cloud's h fixed, passes them the whole cloud's
+  //! estimate here, so that a tiled run splits and refits as the in-memory run does.
   double refit_noise_sigma = 0;
   bool remove_small_components = false;  //!< drop components (link radius h) smaller than below
   std::size_t min_component_size = 0;    //!< 0 = max(k_min, 1e-3 N)
@@ -183,9 +187,9 @@ void validate(const FilterOptions& options);
 //! walls locally rougher. The displacement test (displacement_sigma) dropped 1,288 points (0.55 %)
 //! of the bundled recording a median 5.6 mm from the cleaned surface at a median depth of 3.7 m,
 //! where the sensor's depth noise is several times that: surface points, not outliers
-//! (bench/README.md, "Defaults"). The own-plane refit (refit_spread) stays off (as in the
-//! library's defaults): quantised depth steps look like separate sheets to it, and it was not
-//! measured on depth frames.
+//! (bench/README.md, "Defaults"). The sheet refit (refit_spread) stays off (as in the library's
+//! defaults): quantised depth steps look like separate sheets to it. The crease split
+//! (crease_spread) is off too: it was not measured on depth frames against a reference.
 FilterOptions depth_frame_options();
 
 }  // namespace scanclean
