@@ -75,9 +75,9 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
   cmd.add_option("--refit-spread", v->refit_spread,
                  "Sheet refit: fit a kernel on its own sheet where two sheets lie within h "
                  "(tested where its plane leaves more than this many noise sigma as spread), so "
-                 "thin parts stay apart; clouds without normals only (with normals the sheets "
-                 "are kept apart by them), automatic h, also tiled; 0 = off; 1.1 suits thin parts "
-                 "and detail finer than h")
+                 "thin parts stay apart; not in clouds with sensor normals (they keep the "
+                 "sheets apart), automatic h, also tiled; 0 = off; 1.1 suits thin parts and "
+                 "detail finer than h")
       ->check(number_in(0, 100))
       ->capture_default_str();
   cmd.add_option("--outlier-sigma", v->outlier_sigma,

@@ -1,16 +1,17 @@
 #pragma once
-//! Internal: the own-plane refit of a kernel (FilterOptions::refit_spread). Where one plane does
-//! not explain a kernel's neighbourhood - two sheets of a thin part within h, a sharp crease, a
-//! detail finer than h - its weighted PCA is a blend: a plane between the sheets, a rounded
-//! crease, a plane cutting through a thin tube. Such a kernel is detected by its residual spread
-//! (sqrt(lambda_3) above refit_spread x the cloud's noise sigma) and refitted on the neighbours
-//! near the plane through its own centre point: only those within 3 noise sigma of the plane
-//! (the plane refitted on them and the selection repeated, three times), provided the
-//! neighbours left out hold at least 10 % of the chi weight (a second structure, not a noisy
-//! plane whose spread is high by chance; where the first band already keeps over 95 % of it,
-//! the refit stops there). The kernel then
-//! describes its own sheet or its own side of the crease, and the projection's truncation
-//! (Mahalanobis distance, slab) keeps the other side's kernels from pulling a point across.
+//! Internal: the refits of a kernel whose plane does not explain its neighbourhood - two sheets
+//! of a thin part within h, a sharp crease, a detail finer than h - where its weighted PCA is a
+//! blend: a plane between the sheets, a rounded crease, a plane cutting through a thin tube.
+//! Such a kernel is detected by its residual spread (sqrt(lambda_3) above a ratio x the cloud's
+//! noise sigma). The crease split (FilterOptions::crease_spread, split_crease below) fits it on
+//! its own face of a crease. The sheet refit (FilterOptions::refit_spread, refit_own_plane)
+//! fits it on the neighbours near the plane through its own centre point: only those within 3
+//! noise sigma of the plane (the plane refitted on them and the selection repeated, three
+//! times), provided the neighbours left out hold at least 10 % of the chi weight (a second
+//! structure, not a noisy plane whose spread is high by chance; where the first band already
+//! keeps over 95 % of it, the refit stops there). The kernel then describes its own sheet or its
+//! own side of the crease, and the projection's truncation (Mahalanobis distance, slab) keeps
+//! the other side's kernels from pulling a point across.
 
 #include <Eigen/Core>
 #include <vector>
