@@ -58,33 +58,24 @@ struct SidePlane {
   int count = 0;
 };
 
-// The samples k with keep(k): their weight (their chi weights, or 1 each), mean and covariance
-// under it, count and chi weight.
+// The chi-weighted weight, mean and covariance of the samples.
 struct Moments {
-  double w = 0, chi = 0;
-  int count = 0;
+  double w = 0;
   Eigen::Vector3d m = Eigen::Vector3d::Zero();
   Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
 };
-template <class Keep>
-Moments moments(const std::vector<FitSample>& s, bool chi_weighted, Keep&& keep) {
+Moments chi_moments(const std::vector<FitSample>& s) {
   Moments mo;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  for (std::size_t k = 0; k < s.size(); ++k) {
-    if (!keep(k)) continue;
-    const double t = chi_weighted ? s[k].t : 1.0;
-    mo.w += t;
-    sum += t * Eigen::Vector3d(s[k].x, s[k].y, s[k].z);
-    mo.chi += s[k].t;
-    ++mo.count;
+  for (const FitSample& q : s) {
+    mo.w += q.t;
+    sum += q.t * Eigen::Vector3d(q.x, q.y, q.z);
   }
   if (!(mo.w > 0)) return mo;
   mo.m = sum / mo.w;
-  for (std::size_t k = 0; k < s.size(); ++k) {
-    if (!keep(k)) continue;
-    const double t = chi_weighted ? s[k].t : 1.0;
-    const Eigen::Vector3d d = Eigen::Vector3d(s[k].x, s[k].y, s[k].z) - mo.m;
-    mo.c.noalias() += t * d * d.transpose();
+  for (const FitSample& q : s) {
+    const Eigen::Vector3d d = Eigen::Vector3d(q.x, q.y, q.z) - mo.m;
+    mo.c.noalias() += q.t * d * d.transpose();
   }
   mo.c /= mo.w;
   return mo;
@@ -221,7 +212,6 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   if (!wants_split(fit, prm) || ns < 2 * static_cast<std::size_t>(prm.k_min)) return false;
   double total = 0;
   for (const FitSample& q : samples) total += q.t;
-  const auto all = [](std::size_t) { return true; };
   thread_local std::vector<std::uint8_t> side;
   side.resize(ns);
   SidePlane one;
@@ -270,7 +260,7 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   // the noise does along the normal, and their weighted PCA would take that direction for the
   // normal.
   if (static_cast<int>(sel.size()) < prm.k_min) return false;
-  const Moments mo = moments(sel, true, all);
+  const Moments mo = chi_moments(sel);
   if (!(mo.w > 0)) return false;
   const Eigen::Vector3d& m = mo.m;
   const Eigen::Matrix3d& c = mo.c;
