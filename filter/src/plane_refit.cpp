@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdint>
 
+#include "point_moments.h"
+
 namespace scanclean::detail {
 
 bool refit_own_plane(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre, double h,
@@ -81,18 +83,14 @@ Moments chi_moments(const std::vector<FitSample>& s) {
   return mo;
 }
 
-// Unweighted sums of samples (each counted once) and the chi weights they carry: one pass feeds
-// a plane per side.
+// The unweighted moments of samples (each counted once) and the chi weights they carry: one
+// pass feeds a plane per side.
 struct PlaneSums {
-  double count = 0, chi = 0;
-  Eigen::Vector3d s = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d ss = Eigen::Matrix3d::Zero();
+  PointMoments m;
+  double chi = 0;
   void add(const FitSample& q) {
-    const Eigen::Vector3d x(q.x, q.y, q.z);
-    count += 1;
+    m.add(q.x, q.y, q.z);
     chi += q.t;
-    s += x;
-    ss.noalias() += x * x.transpose();
   }
 };
 
@@ -102,15 +100,15 @@ struct PlaneSums {
 // h of the centre point, so the covariance from the raw sums loses nothing that matters in
 // double.
 bool plane_of(const PlaneSums& sums, int k_min, SidePlane& out, double* r2 = nullptr) {
-  if (sums.count < std::max(3, k_min)) return false;
-  const Eigen::Vector3d m = sums.s / sums.count;
-  const Eigen::Matrix3d c = sums.ss / sums.count - m * m.transpose();
+  if (sums.m.n < std::max(3, k_min)) return false;
+  const Eigen::Vector3d m = sums.m.mean();
+  const Eigen::Matrix3d c = sums.m.second() - m * m.transpose();
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
   es.computeDirect(c);
   out.m = m;
   out.n = es.eigenvectors().col(0);
   out.weight = sums.chi;
-  out.count = static_cast<int>(sums.count);
+  out.count = static_cast<int>(sums.m.n);
   if (r2) *r2 = std::max(0.0, es.eigenvalues()(0));
   return true;
 }

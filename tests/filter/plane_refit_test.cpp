@@ -19,6 +19,16 @@ namespace {
 constexpr double kH = 1.0;
 constexpr double kSigma = 0.02;
 
+// Appends p (an offset from the centre point at the origin) with its chi weight
+// t = (1 - r^2 / h^2)^4 when it lies within h.
+void add_within_h(const Eigen::Vector3d& p, std::vector<FitSample>& out) {
+  const double r2 = p.squaredNorm();
+  if (!(r2 < kH * kH)) return;
+  double t = 1.0 - r2 / (kH * kH);
+  t *= t;
+  out.push_back({p.x(), p.y(), p.z(), t * t});
+}
+
 // Samples (offsets from the centre point at the origin) with their chi weights, from points
 // drawn uniformly in the ball's square [-h, h]^2 and mapped onto the surface by `place`, plus
 // Gaussian noise along z (seeded).
@@ -31,11 +41,7 @@ std::vector<FitSample> samples(std::size_t n, std::uint32_t seed, Place&& place,
   std::vector<FitSample> out;
   while (out.size() < n) {
     const Eigen::Vector3d p = place(u(rng), u(rng), g(rng));
-    const double r2 = p.squaredNorm();
-    if (!(r2 < kH * kH)) continue;
-    double t = 1.0 - r2 / (kH * kH);
-    t *= t;
-    out.push_back({p.x(), p.y(), p.z(), t * t});
+    add_within_h(p, out);
   }
   return out;
 }
@@ -213,11 +219,7 @@ TEST(PlaneRefitTest, TheCreaseSplitLeavesASurfaceBentWithinHAlone) {
     if (!(dir.squaredNorm() > 1e-6 && dir.squaredNorm() < 1)) continue;
     const Eigen::Vector2d xz = (kR + g(rng)) * dir.normalized();
     const Eigen::Vector3d p(xz.x(), y, xz.y() - kR);
-    const double r2 = p.squaredNorm();
-    if (!(r2 < kH * kH)) continue;
-    double t = 1.0 - r2 / (kH * kH);
-    t *= t;
-    nb.push_back({p.x(), p.y(), p.z(), t * t});
+    add_within_h(p, nb);
   }
   std::vector<FitSample> copy = nb;
   KernelFit fit;
@@ -261,11 +263,7 @@ std::vector<FitSample> edge_samples(double rho, double c, double sigma, std::uin
     }
     p += e * n;
     const Eigen::Vector3d q(p.x() + c, y, p.y());
-    const double r2 = q.squaredNorm();
-    if (!(r2 < kH * kH)) continue;
-    double t = 1.0 - r2 / (kH * kH);
-    t *= t;
-    out.push_back({q.x(), q.y(), q.z(), t * t});
+    add_within_h(q, out);
   }
   return out;
 }
