@@ -25,6 +25,7 @@ std::string FilterSettings::describe() const {
   if (cgal_orient_k > 0) s << ", CGAL normals (PCA k=" << cgal_orient_k << ", MST)";
   if (scale_regions > 0) s << ", scale_regions=" << scale_regions;
   if (k_h > 0) s << ", K_h=" << k_h;
+  if (scale_gamma >= 0) s << ", scale_gamma=" << scale_gamma;
   if (normals_orient_only) s << ", normals_orient_only";
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
@@ -58,6 +59,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   options.normals_orient_only = settings.normals_orient_only;
   options.orient_k = settings.orient_k;
   if (settings.k_h > 0) options.k_h = settings.k_h;
+  if (settings.scale_gamma >= 0) options.scale_gamma = settings.scale_gamma;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r;
   if (settings.cgal_orient_k > 0 && !input.has_normals()) {

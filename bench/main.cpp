@@ -156,6 +156,11 @@ int run(int argc, char** argv) {
                  "quality, real and speed suites: robust_filter's K_h (as scanclean filter --k-h; "
                  "0 = the library's default), to measure what it trades")
       ->check(CLI::Range(0, 1000));
+  double scale_gamma = -1;
+  app.add_option("--scale-gamma", scale_gamma,
+                 "quality and real suites: robust_filter's scale_gamma (the scale test, as "
+                 "scanclean filter --scale-gamma; default: the library's; 0 = the test off)")
+      ->check(CLI::Range(0.0, 20.0));
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
@@ -188,6 +193,7 @@ int run(int argc, char** argv) {
   ctx.cgal_orient_normals = cgal_orient_normals;
   ctx.scale_regions = scale_regions;
   ctx.k_h = k_h;
+  ctx.scale_gamma = scale_gamma;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

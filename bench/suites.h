@@ -38,6 +38,8 @@ struct Context {
   int scale_regions = 0;
   //! quality, real and speed suites: FilterOptions::k_h (0: the library's default)
   int k_h = 0;
+  //! quality and real suites: FilterOptions::scale_gamma (< 0: the library's default)
+  double scale_gamma = -1;
   //! mesh suite: write its PNG pictures into this folder (empty: none)
   std::filesystem::path pictures_dir;
   std::vector<Table> tables;
