@@ -368,6 +368,8 @@ int run_filter(FilterCommandOptions c, const FilterCliValues& values) {
   if (o.scale == ScaleMode::kAuto) {
     sum.add("noise sigma (estimate)", s.noise_sigma * 1000.0, 3, "mm");
     if (o.scale_gamma > 0) sum.add("h before the scale test", s.h_noise * 1000.0, 3, "mm");
+    if (o.scale_regions > 0 && o.crease_spread > 0)
+      sum.add_count("scale test: samples beside creases", s.scale_crease_samples);
   }
   sum.add("mean spacing", s.mean_spacing * 1000.0, 3, "mm");
   sum.add("kernels", with_thousands(s.kernels) +

@@ -217,6 +217,7 @@ void note_report_filter([[maybe_unused]] const std::string& label,
   j["h_max_m"] = s.h_max;
   j["h0_m"] = s.h0;
   j["h_noise_m"] = s.h_noise;
+  j["scale_crease_samples"] = s.scale_crease_samples;
   j["noise_sigma_m"] = s.noise_sigma;
   j["mean_spacing_m"] = s.mean_spacing;
   j["merge_eps_m"] = s.merge_eps;

@@ -36,6 +36,8 @@ struct NoiseScale {
   double noise_sigma_h0 = 0;
   double h_noise = 0;  //!< max(h0, noise_factor sigma), before the scale test
   double reach = 0;    //!< the largest query radius used around a sample
+  //! the scale test's samples whose radius its crease test raised (ScaleSelectionOptions::crease)
+  std::size_t crease_samples = 0;
 };
 
 //! The noise fixed point over `sigma_samples` and the scale test over `test_samples` (indices

@@ -205,7 +205,7 @@ double bend_across(const std::vector<FitSample>& s, const SidePlane& plane,
 }  // namespace
 
 bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
-                  const PlaneRefit& prm, KernelFit& fit) {
+                  const PlaneRefit& prm, KernelFit& fit, CreaseSide* side_out) {
   const std::size_t ns = samples.size();
   if (!wants_split(fit, prm) || ns < 2 * static_cast<std::size_t>(prm.k_min)) return false;
   double total = 0;
@@ -287,6 +287,11 @@ bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& 
   trial.weight = mo.w;
   trial.n = fit.n;  // the caller's (a sensor normal stays)
   fit = trial;
+  if (side_out) {
+    side_out->b = best.b;
+    side_out->p = best.p;
+    side_out->own = own == 1;
+  }
   return true;
 }
 

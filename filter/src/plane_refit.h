@@ -84,8 +84,15 @@ constexpr double kCreaseSpread = 1.3;
 constexpr double kCreaseMargin = 2.0;
 constexpr double kCreaseBend = 1.4;
 constexpr double kCreaseFlat = 0.05;
+//! The side of the crease split_crease kept: the points q (offsets from the centre point) with
+//! (b . (q - p) > 0) == own lie on it.
+struct CreaseSide {
+  Eigen::Vector3d b = Eigen::Vector3d::UnitX(), p = Eigen::Vector3d::Zero();
+  bool own = true;
+  bool holds(const Eigen::Vector3d& q) const { return (b.dot(q - p) > 0) == own; }
+};
 bool split_crease(const std::vector<FitSample>& samples, const Eigen::Vector3d& centre,
-                  const PlaneRefit& prm, KernelFit& fit);
+                  const PlaneRefit& prm, KernelFit& fit, CreaseSide* side = nullptr);
 
 //! split_crease's first test, on the samples' unweighted moments (fit_kernel's): whether the
 //! single plane leaves the samples alike more than kCreaseBend times the chi-weighted spread

@@ -239,6 +239,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   st.noise_sigma = scale.noise_sigma;
   st.noise_sigma_h0 = scale.noise_sigma_h0;
   st.h_noise = scale.h_noise;
+  st.scale_crease_samples = scale.crease_samples;
   const int K = o.scale == ScaleMode::kAdaptive ? o.k_adaptive : o.k_h;
   // Spacing from the neighbour distance h0 (kAuto), not from an h the noise has raised.
   st.mean_spacing =

@@ -116,6 +116,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       sr.noise_sigma_h0 = ns.noise_sigma_h0;
       sr.noise_sigma = ns.noise_sigma;
       sr.h_noise = ns.h_noise;
+      sr.crease_samples = ns.crease_samples;
       h = ns.h;
     } else {
       std::vector<float> hi(N);

@@ -15,12 +15,13 @@
 namespace scanclean::detail {
 
 struct ScaleChoice {
-  double h = 0;                 //!< the kernel size (kAdaptive: the median h_i)
-  double h_min = 0, h_max = 0;  //!< range of h_i (kAdaptive, scale_regions; else both h)
-  double h0 = 0;                //!< kAuto: the median K_h-th neighbour distance
-  double noise_sigma = 0;       //!< kAuto: median sqrt(lambda_3) at h_noise
-  double noise_sigma_h0 = 0;    //!< kAuto: the same at h0
-  double h_noise = 0;           //!< kAuto: max(h0, noise_factor sigma), before scale selection
+  double h = 0;                    //!< the kernel size (kAdaptive: the median h_i)
+  double h_min = 0, h_max = 0;     //!< range of h_i (kAdaptive, scale_regions; else both h)
+  double h0 = 0;                   //!< kAuto: the median K_h-th neighbour distance
+  double noise_sigma = 0;          //!< kAuto: median sqrt(lambda_3) at h_noise
+  double noise_sigma_h0 = 0;       //!< kAuto: the same at h0
+  double h_noise = 0;              //!< kAuto: max(h0, noise_factor sigma), before scale selection
+  std::size_t crease_samples = 0;  //!< kAuto: the scale test's samples its crease test raised
   //! The size the neighbour grids are made for: h, or with h_i the 99th percentile of h_i
   //! (between h and 1.7 h). A query of radius r takes the grid's fast path (the 27 cells
   //! around a point) only when r is at most the cell; sized for the median h_i, half of the

@@ -15,6 +15,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "plane_refit.h"
+
 namespace scanclean {
 class NeighborIndex;
 }
@@ -26,14 +28,25 @@ struct ScaleSelectionOptions {
   double gamma = 3.0;         //!< interval half-width in standard errors
   int k_min = 8;              //!< a radius with fewer neighbours ends the ladder
   double sigma = 0;           //!< > 0: the noise sigma for the standard errors (else lambda_3)
+  //! The crease test, with crease.creases() (FilterOptions::crease_spread with scale_regions):
+  //! where a ball's interval leaves the smaller balls', split_crease (the kernels' crease split,
+  //! on the ball's neighbours with their chi weights at its radius) is tried on that ball, then
+  //! on each larger one, until one holds a sharp crease. The ladder is then run again on the
+  //! neighbours on the point's side of that wedge (its separating plane), and where every ball
+  //! passes there, the point takes the largest radius. A crease the kernels split is no reason
+  //! for a smaller h: on the faces beside it a smaller h only leaves more noise.
+  PlaneRefit crease;
+  double eigen_floor = 0.05;  //!< FilterOptions::eigen_floor (the crease test's fit)
 };
 
-//! The radius chosen for each point p[q] with q in `queries`. `index` holds the points of `p`
+//! The radius chosen for each point p[q] with q in `queries`; `creases` (optional) receives the
+//! number of points whose radius the crease test raised. `index` holds the points of `p`
 //! (its original indices are p's), in float, relative to the same origin. A point whose smallest
 //! ball holds fewer than k_min neighbours gets radii.front(). Deterministic; parallel (TBB).
 std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const NeighborIndex& index,
                                  const std::vector<std::size_t>& queries,
-                                 const ScaleSelectionOptions& options);
+                                 const ScaleSelectionOptions& options,
+                                 std::size_t* creases = nullptr);
 
 //! The scale per region (FilterOptions::scale_regions), one per grid cell of `cells` (an index
 //! over the cloud's points): the median of `radii` (one per sample, as select_scale returned

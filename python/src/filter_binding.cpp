@@ -219,6 +219,7 @@ py::dict stats_to_dict(const FilterStats& s) {
   d["noise_sigma"] = s.noise_sigma;
   d["noise_sigma_h0"] = s.noise_sigma_h0;
   d["h_noise"] = s.h_noise;
+  d["scale_crease_samples"] = s.scale_crease_samples;
   d["kernel_stride"] = s.kernel_stride;
   d["merge_eps"] = s.merge_eps;
   d["mean_iterations"] = s.mean_iterations;

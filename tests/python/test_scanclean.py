@@ -168,3 +168,7 @@ def test_crease_split_through_the_bindings_keeps_an_edge_sharp():
     assert split["stats"]["kernels_split"] > 100
     # Measured: 0.00202 against 0.00312.
     assert edge_rms(split) < 0.75 * edge_rms(plain)
+    # The scale test's crease test runs with a scale per region only.
+    assert split["stats"]["scale_crease_samples"] == 0
+    regions = scanclean.robust_filter(points, crease_spread=1.1, scale_regions=96)
+    assert regions["stats"]["scale_crease_samples"] > 0

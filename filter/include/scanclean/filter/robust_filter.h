@@ -93,7 +93,10 @@ struct FilterStats {
   //! kAuto: the same where the fixed point starts: h0, or with K_h < 96 about the radius of 96
   //! neighbours (biased low when that is below ~6 sigma)
   double noise_sigma_h0 = 0;
-  double h_noise = 0;     //!< kAuto: max(h0, noise_factor sigma), before the scale test (metres)
+  double h_noise = 0;  //!< kAuto: max(h0, noise_factor sigma), before the scale test (metres)
+  //! kAuto with scale_regions and crease_spread: the scale test's samples (about 2,500) whose
+  //! radius its crease test raised (a crease beside them, their own face flat farther out).
+  std::size_t scale_crease_samples = 0;
   int kernel_stride = 1;  //!< kernels at every kernel_stride-th point
   double merge_eps = 0;   //!< merging distance used (metres)
   double mean_iterations = 0;
