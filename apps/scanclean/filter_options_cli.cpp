@@ -43,7 +43,8 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
                  "Automatic h with the scale test: a scale per region, each point's h the median "
                  "of the scale test's radii at the K sampled points nearest to its grid cell (of "
                  "about 2,500; 96 suits the benchmark's thin parts, creases and fine detail), "
-                 "instead of one median for the cloud (0 = off); not in tiled runs")
+                 "instead of one median for the cloud (0 = off); with --crease-spread, the "
+                 "points beside a sharp crease keep the h of their own face; not in tiled runs")
       ->check(CLI::Range(0, 256))
       ->capture_default_str();
   cmd.add_option("--kernel-stride", v->kernel_stride,

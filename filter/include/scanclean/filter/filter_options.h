@@ -67,8 +67,10 @@ struct FilterOptions {
   //! detail, thin parts and creases, a larger one on smooth regions. Off by default: with
   //! k = 96 the benchmark's shapes at the known limits came out up to 22 % closer (CD) and the
   //! bunny mesh 3-9 %, but the torus and rounded box moved by up to +1.8 % (P2M +3 %) and the
-  //! merged bunny scans' p95 from 0.138 to 0.139 mm (bench/README.md, "Defaults"). Not in
-  //! tiled runs.
+  //! merged bunny scans' p95 from 0.138 to 0.139 mm (bench/README.md, "Defaults"). With
+  //! crease_spread as well, a sample beside a sharp crease that the kernels would split takes
+  //! the radius its own face allows (the scale test's crease test, scale_selection.h), not the
+  //! smaller one the other face's points would give it. Not in tiled runs.
   int scale_regions = 0;
   //! Kernels at every kernel_stride-th point (spatially even, in grid order), their weights
   //! multiplied by the stride, [0, 64]. 1: a kernel at every point (the paper). 0 (automatic):
@@ -128,7 +130,8 @@ struct FilterOptions {
   //! rounding the edge. 1.1 is the recommended value for CAD parts and other objects with sharp
   //! edges. Off by default: on the smooth protocol shapes and the real scans the benchmark
   //! measures it moved the figures by up to 2 % either way and took 40-60 % longer on the merged
-  //! bunny scans (README, "Shapes at the known limits").
+  //! bunny scans (README, "Shapes at the known limits"). With scale_regions, the scale test
+  //! also looks for such creases (see there).
   double crease_spread = 0;
   //! Sheet refit of the kernels (kAuto, or a fixed h with refit_noise_sigma), [0, 100]; 0 = off.
   //! A kernel whose plane leaves a residual spread sqrt(lambda_3) above refit_spread x the
