@@ -112,42 +112,43 @@ std::vector<double> select_scale(const std::vector<Eigen::Vector3d>& p, const Ne
   // consecutive slots (read in input order, they were scattered over the whole cloud, and the
   // loop waited on the memory). The same neighbours, in the same order.
   const std::vector<Eigen::Vector3d> ps = permuted(p, index.order());
+  // The radius index chosen for query qi; `around` receives its neighbours for the crease test.
+  auto choose = [&](std::size_t qi, std::vector<ShellPoint>& around) {
+    const std::size_t i = queries[qi];
+    const Eigen::Vector3d& x = p[i];
+    // Shell k holds the neighbours with r_{k-1} < |q| <= r_k; the balls are their sums.
+    std::array<Moments, kMaxRadii> shell;
+    around.clear();
+    const std::uint32_t own = index.slot_of(static_cast<std::uint32_t>(i));
+    index.for_each_slot_within(x.cast<float>(), rmax, [&](std::uint32_t j, float) {
+      if (j == own) return;
+      const Eigen::Vector3d q = ps[j] - x;
+      const double d2 = q.squaredNorm();
+      std::size_t k = 0;  // the first radius at or beyond |q|
+      for (std::size_t r = 0; r < K; ++r) k += d2 > r2[r] ? 1 : 0;
+      if (k < K) {
+        shell[k].add(q.x(), q.y(), q.z());
+        if (crease_test) around.push_back({q, k});
+      }
+    });
+    const Ladder l = run_ladder(shell.data(), K, o);
+    if (crease_test && l.broke < K) {
+      int face = -1;
+      for (std::size_t b = l.broke; b < K && face < 0; ++b)
+        face = own_face_ladder(around, b, o.radii[b], K, o);
+      if (face == static_cast<int>(K) - 1 && face > l.chosen) {
+        raised[qi] = 1;
+        return face;
+      }
+    }
+    return l.chosen;
+  };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 64),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       thread_local std::vector<ShellPoint> around;
-                      for (std::size_t qi = range.begin(); qi < range.end(); ++qi) {
-                        const std::size_t i = queries[qi];
-                        const Eigen::Vector3d& x = p[i];
-                        // Shell k holds the neighbours with r_{k-1} < |q| <= r_k; the balls are
-                        // their sums.
-                        std::array<Moments, kMaxRadii> shell;
-                        around.clear();
-                        const std::uint32_t own = index.slot_of(static_cast<std::uint32_t>(i));
-                        index.for_each_slot_within(
-                            x.cast<float>(), rmax, [&](std::uint32_t j, float) {
-                              if (j == own) return;
-                              const Eigen::Vector3d q = ps[j] - x;
-                              const double d2 = q.squaredNorm();
-                              std::size_t k = 0;  // the first radius at or beyond |q|
-                              for (std::size_t r = 0; r < K; ++r) k += d2 > r2[r] ? 1 : 0;
-                              if (k < K) {
-                                shell[k].add(q.x(), q.y(), q.z());
-                                if (crease_test) around.push_back({q, k});
-                              }
-                            });
-                        const Ladder l = run_ladder(shell.data(), K, o);
-                        int chosen = l.chosen;
-                        if (crease_test && l.broke < K) {
-                          int face = -1;
-                          for (std::size_t b = l.broke; b < K && face < 0; ++b)
-                            face = own_face_ladder(around, b, o.radii[b], K, o);
-                          if (face == static_cast<int>(K) - 1 && face > chosen) {
-                            chosen = face;
-                            raised[qi] = 1;
-                          }
-                        }
-                        if (chosen >= 0) out[qi] = o.radii[static_cast<std::size_t>(chosen)];
-                      }
+                      for (std::size_t qi = range.begin(); qi < range.end(); ++qi)
+                        if (const int k = choose(qi, around); k >= 0)
+                          out[qi] = o.radii[static_cast<std::size_t>(k)];
                     });
   if (creases)
     for (const std::uint8_t r : raised) *creases += r;
