@@ -662,7 +662,10 @@ TEST(RobustFilterTest, WithTheScalePerRegionFacesBesideACreaseKeepTheirLargerH) 
   // cloud with the split alone); RMS 0.00241 against 0.00190.
   EXPECT_GT(face.stats.h_min, plain.stats.h_min);
   EXPECT_LT(r_face, 0.9 * r_plain);
-  EXPECT_LE(r_face, r_one);
+  // Not worse than one h with the split: here every region took the cloud's h, which the
+  // regions hold in float and one h in double, so the two differ in the last digits (under the
+  // sanitizers' build 0.00189964 against 0.00189964, the first larger).
+  EXPECT_LE(r_face, r_one * (1 + 1e-4));
   // The same output for any thread count.
   FilterOptions serial = no_merge();
   serial.crease_spread = 1.1;
