@@ -78,7 +78,6 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     so.gamma = o.scale_gamma;
     so.k_min = o.k_min;
     so.sigma = std::max(ns.noise_sigma, o.eigen_floor * h);
-    so.eigen_floor = o.eigen_floor;
     // The crease test only with a scale per region: with one h for the cloud, the median
     // radius decides h everywhere, and raising it for the samples beside creases raised it for
     // thin parts and fine detail elsewhere too (the benchmark's thin plate at 50k points and

@@ -84,7 +84,8 @@ int own_face_ladder(const std::vector<ShellPoint>& around, std::size_t ball, dou
   }
   untrimmed = samples;
   KernelFit fit;
-  if (!fit_samples(samples, Eigen::Vector3d::Zero(), radius, o.crease.k_min, o.eigen_floor, fit))
+  if (!fit_samples(samples, Eigen::Vector3d::Zero(), radius, o.crease.k_min, o.crease.eigen_floor,
+                   fit))
     return -1;
   CreaseSide side;
   if (!split_crease(untrimmed, Eigen::Vector3d::Zero(), o.crease, fit, &side)) return -1;

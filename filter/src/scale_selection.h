@@ -36,7 +36,6 @@ struct ScaleSelectionOptions {
   //! passes there, the point takes the largest radius. A crease the kernels split is no reason
   //! for a smaller h: on the faces beside it a smaller h only leaves more noise.
   PlaneRefit crease;
-  double eigen_floor = 0.05;  //!< FilterOptions::eigen_floor (the crease test's fit)
 };
 
 //! The radius chosen for each point p[q] with q in `queries`; `creases` (optional) receives the
