@@ -26,6 +26,7 @@ std::string FilterSettings::describe() const {
   if (scale_regions > 0) s << ", scale_regions=" << scale_regions;
   if (k_h > 0) s << ", K_h=" << k_h;
   if (scale_gamma >= 0) s << ", scale_gamma=" << scale_gamma;
+  if (passes > 0) s << ", passes=" << passes;
   if (normals_orient_only) s << ", normals_orient_only";
   s << (merge ? ", merge_eps=default (0.25 s)" : ", merge_eps=0");
   return s.str();
@@ -60,6 +61,7 @@ FilterRun run_robust_filter(const PointCloud& input, const FilterSettings& setti
   options.orient_k = settings.orient_k;
   if (settings.k_h > 0) options.k_h = settings.k_h;
   if (settings.scale_gamma >= 0) options.scale_gamma = settings.scale_gamma;
+  if (settings.passes > 0) options.passes = settings.passes;
   const auto t0 = std::chrono::steady_clock::now();
   FilterResult r;
   if (settings.cgal_orient_k > 0 && !input.has_normals()) {

@@ -30,6 +30,7 @@ struct FilterSettings {
   int cgal_orient_k = 0;
   int scale_regions = 0;             //!< FilterOptions::scale_regions (0: one h for the cloud)
   int k_h = 0;                       //!< FilterOptions::k_h (0: the library's default)
+  int passes = 0;                    //!< FilterOptions::passes (0: the library's default)
   double scale_gamma = -1;           //!< FilterOptions::scale_gamma (< 0: the library's default)
   bool normals_orient_only = false;  //!< FilterOptions::normals_orient_only
   std::string describe() const;

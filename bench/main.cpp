@@ -161,6 +161,12 @@ int run(int argc, char** argv) {
                  "quality and real suites: robust_filter's scale_gamma (the scale test, as "
                  "scanclean filter --scale-gamma; default: the library's; 0 = the test off)")
       ->check(CLI::Range(0.0, 20.0));
+  int passes = 0;
+  app.add_option("--passes", passes,
+                 "quality and real suites: robust_filter's passes (as scanclean filter --passes: 2 "
+                 "refits the kernels on the first pass's output and projects again; 0 = the "
+                 "library's default)")
+      ->check(CLI::Range(0, 2));
   std::string pictures;
   app.add_option("--pictures", pictures, "mesh suite: write its pictures (PNG) into this folder");
   app.add_option("--speed-child", speed_child, "internal: run one speed measurement")->group("");
@@ -194,6 +200,7 @@ int run(int argc, char** argv) {
   ctx.scale_regions = scale_regions;
   ctx.k_h = k_h;
   ctx.scale_gamma = scale_gamma;
+  ctx.passes = passes;
   ctx.self_exe = std::filesystem::read_symlink("/proc/self/exe");
   ctx.bunny_mesh = bunny_mesh;
   ctx.bunny_conf = bunny_conf;

@@ -39,6 +39,7 @@ std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool 
     fs.scale_regions = ctx.scale_regions;
     fs.k_h = ctx.k_h;
     fs.scale_gamma = ctx.scale_gamma;
+    fs.passes = ctx.passes;
     m.push_back({"scanclean robust_filter", fs.describe(),
                  [fs](const Points& in) { return run_robust_filter(in, fs).cloud.positions; }});
   }

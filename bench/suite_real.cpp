@@ -193,6 +193,7 @@ void run_real_suite(Context& ctx) {
   fs.scale_regions = ctx.scale_regions;
   fs.k_h = ctx.k_h;
   fs.scale_gamma = ctx.scale_gamma;
+  fs.passes = ctx.passes;
   FilterRun run = run_robust_filter(merged, fs);
   const DistanceStats before = distance_stats(md, merged.positions);
   const DistanceStats after = distance_stats(md, run.cloud.positions);

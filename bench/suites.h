@@ -40,6 +40,8 @@ struct Context {
   int k_h = 0;
   //! quality and real suites: FilterOptions::scale_gamma (< 0: the library's default)
   double scale_gamma = -1;
+  //! quality and real suites: FilterOptions::passes (0: the library's default)
+  int passes = 0;
   //! mesh suite: write its PNG pictures into this folder (empty: none)
   std::filesystem::path pictures_dir;
   std::vector<Table> tables;
