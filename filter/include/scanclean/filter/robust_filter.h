@@ -81,9 +81,11 @@ struct FilterStats {
   }
   std::size_t merged = 0;   //!< input points merged into another output point
   std::size_t kernels = 0;  //!< points that got a kernel (>= k_min neighbours)
-  //! Kernels refitted on their own sheet (FilterOptions::refit_spread).
+  //! Kernels refitted on their own sheet (FilterOptions::refit_spread); with passes = 2, in
+  //! both passes.
   std::size_t kernels_refitted = 0;
-  //! Kernels fitted on their own face of a crease (FilterOptions::crease_spread).
+  //! Kernels fitted on their own face of a crease (FilterOptions::crease_spread); with
+  //! passes = 2, in both passes.
   std::size_t kernels_split = 0;
   double h = 0;                 //!< kernel size (metres); kAdaptive: median h_i
   double h_min = 0, h_max = 0;  //!< range of h_i (equal to h unless kAdaptive or scale_regions)
