@@ -70,15 +70,20 @@ std::vector<Method> smoothing_methods(const PeerSettings& ps, int threads, bool 
 // (closest_point). Its CD and P2M are what a projection that keeps each point's position along
 // the surface would reach at best; the tangential noise remains.
 constexpr const char* kIdealProjection = "ideal projection (reference)";
+// Not a method either: N fresh noise-free points of the true surface, drawn independently of
+// the instance. What a method that knew the surface exactly and resampled it (spreading its
+// points over the surface, as WLOP does, instead of moving each input point across it) would
+// score.
+constexpr const char* kIdealResample = "exact resampling (reference)";
 
 // A fixed row order per method name (the method list differs between sizes: WLOP is optional).
 int method_order(const std::string& name) {
   static const char* const kOrder[] = {
       "noisy input", "scanclean robust_filter", "CGAL jet_smooth", "CGAL bilateral_smooth",
-      "CGAL wlop",   "PCA-plane projection",    kIdealProjection};
-  for (int i = 0; i < 7; ++i)
+      "CGAL wlop",   "PCA-plane projection",    kIdealProjection,  kIdealResample};
+  for (int i = 0; i < 8; ++i)
     if (name == kOrder[i]) return i;
-  return 7;
+  return 8;
 }
 
 struct Accum {
@@ -196,6 +201,9 @@ void run_shape_set(Context& ctx, std::vector<std::unique_ptr<Shape>> all, bool l
           for (std::size_t i = 0; i < ideal.size(); ++i)
             ideal[i] = closest_point(shape, inst.input[i]);
           add_row(method_order(kIdealProjection), kIdealProjection, evaluate(gt, ideal), 0);
+          Rng fresh(derive_seed(ctx.seed, 700 + sid, n, seed_index[si]));
+          add_row(method_order(kIdealResample), kIdealResample,
+                  evaluate(gt, shape.sample(n, fresh)), 0);
         }
         for (std::size_t mi = 0; mi < methods.size(); ++mi) {
           std::cerr << "[quality] " << shape.name() << " N=" << n << " sigma=" << sigma << " "
@@ -239,6 +247,10 @@ void run_shape_set(Context& ctx, std::vector<std::unique_ptr<Shape>> all, bool l
                       ": not a method; every noisy input point moved to the nearest point of "
                       "the true surface. What a filter that keeps each point's place along the "
                       "surface could reach at best: its CD and P2M are the tangential noise's.");
+  avg.notes.push_back(std::string(kIdealResample) +
+                      ": not a method either; N fresh noise-free points of the true surface, "
+                      "drawn independently of the input. What a method that knew the surface "
+                      "and spread its points over it (as WLOP spreads them) would score.");
   avg.notes.push_back(
       "Coverage: share of the dense sample within tolerance of the output; tolerance = 99th "
       "percentile of the dense-sample -> clean-sample distance for that shape and N (so the "
@@ -267,7 +279,8 @@ void run_shape_set(Context& ctx, std::vector<std::unique_ptr<Shape>> all, bool l
           double best_cd = 1e300, best_p2m = 1e300, best_edge = 1e300;
           std::string best_name = "-";
           for (const auto& [o, nm] : method_names) {
-            if (o == ours || o == 0 || nm == kIdealProjection) continue;  // 0: the noisy input
+            // 0: the noisy input; the references are not peers
+            if (o == ours || o == 0 || nm == kIdealProjection || nm == kIdealResample) continue;
             const auto jt = per_shape.find({n, s, o, sh->name()});
             if (jt == per_shape.end()) continue;
             if (jt->second.cd < best_cd) {
