@@ -105,7 +105,9 @@ std::shared_ptr<FilterCliValues> add_filter_options(CLI::App& cmd, const FilterC
                  "(>= 0); 0 = max(k_min, 0.1 % of the points); default off")
       ->check(non_negative_number());
   cmd.add_option("--passes", v->passes,
-                 "2 = rebuild the kernels from the first result and project again (heavy noise)")
+                 "2 = rebuild the kernels from the first result and project again: a second "
+                 "smoothing for large noisy clouds (merged scans: closer to the surface at about "
+                 "1.55x the time), which rounds fine detail and small clouds further")
       ->check(integer_in(1, 2))
       ->capture_default_str();
   cmd.add_option("--k-min", v->k_min, "Points with fewer neighbours within h get no kernel")

@@ -89,7 +89,10 @@ struct FilterOptions {
   double tolerance = 1e-4;        //!< convergence: step < tolerance h_i, (0, 0.1]
   int max_iterations = 20;        //!< iteration cap, [1, 255]
   UpdateMode update = UpdateMode::kNormal;
-  int passes = 1;         //!< 2 = rebuild kernels from the first output and project again, [1, 2]
+  //! 2 = rebuild kernels from the first output and project again, [1, 2]. The second pass's
+  //! sheet refit and crease split are triggered against the eigenvalue floor (eigen_floor x h),
+  //! not the input's noise sigma: the first pass's output spreads far less across the surface.
+  int passes = 1;
   double merge_eps = -1;  //!< < 0: 0.25 x mean spacing; 0: no merging; > 0: metres
   //! Density threshold, [0, 1]; 0 = off. Drops output points whose density rho (input points
   //! within h) is below tau x the median, and, before projection, input points whose own
