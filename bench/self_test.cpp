@@ -139,6 +139,13 @@ int self_test_main(std::uint64_t seed) {
     // (A few pairs closer than 0.001 swap their nearest neighbour, which can only lower CD.)
     c.check(sh.cd <= 0.02 + 1e-12 && sh.cd > 0.0198,
             "CD of the clean sample shifted by 0.001 is 2 x 0.001^2 x 1e4", sh.cd);
+    // Exact resampling (the quality suite's second reference row): an independent clean sample
+    // of the same size. Each direction's mean squared nearest distance is then a Poisson
+    // process's, 1 / (pi lambda), so CD = 2 A / (pi N) x 1e4.
+    Rng fresh(derive_seed(seed, 13));
+    const Metrics rs = evaluate(gt, sphere->sample(spec.n, fresh));
+    c.check(std::abs(rs.cd / (2 * poisson) - 1) < 0.03,
+            "CD of an independent clean sample of the same size = 2 A / (pi N) x 1e4", rs.cd);
   }
   // 3. Outlier injection and classification.
   {
