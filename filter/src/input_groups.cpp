@@ -5,10 +5,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <numeric>
 
+#include "fill_later.h"
 #include "parallel.h"
 #include "radix_sort.h"
 
@@ -45,16 +47,21 @@ PointCloud sorted_by_source(const PointCloud& cloud) {
 
 Coincident find_coincident(const PointCloud& input) {
   const std::size_t n = input.size();
+  if (n == 0) return {};
   const auto& p = input.positions;
   auto same = [&](std::uint32_t a, std::uint32_t b) {
     for (int k = 0; k < 3; ++k)
       if (bits_of(p[a][k]) != bits_of(p[b][k])) return false;
     return true;
   };
-  // (hash of the position, index) pairs, sorted stably by the hash's top 33 bits: equal
+  // Records of the hash's top bits above the point's index, sorted stably by those bits: equal
   // positions have equal hashes, so only the points of a run of equal top bits can coincide,
-  // and such runs are rare (about n^2 / 2^34 pairs of distinct points) and short.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> key(n);
+  // and such runs are rare (with 33 bits, about n^2 / 2^34 pairs of distinct points) and short.
+  // One 8-byte record a point (a pair of hash and index took 16): half the sort's traffic.
+  const int id_bits = std::max(1, static_cast<int>(std::bit_width(n - 1)));  // n >= 1
+  const int hash_bits = std::min(33, 64 - id_bits);                          // >= 32
+  const std::uint64_t id_mask = (std::uint64_t{1} << id_bits) - 1;
+  FillLaterVector<std::uint64_t> key(n);
   parallel_each(n, [&](std::size_t i) {
     std::uint64_t h = 0x9E3779B97F4A7C15ULL;
     for (int k = 0; k < 3; ++k) {
@@ -62,11 +69,12 @@ Coincident find_coincident(const PointCloud& input) {
       h *= 0xBF58476D1CE4E5B9ULL;
       h ^= h >> 31;
     }
-    key[i] = {h, static_cast<std::uint32_t>(i)};
+    key[i] = (h >> (64 - hash_bits)) << id_bits | i;
   });
-  auto top = [](const std::pair<std::uint64_t, std::uint32_t>& e) { return e.first >> 31; };
+  auto top = [id_bits](std::uint64_t e) { return e >> id_bits; };
+  auto id = [id_mask](std::uint64_t e) { return static_cast<std::uint32_t>(e & id_mask); };
   {
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch;
+    FillLaterVector<std::uint64_t> scratch;
     stable_radix_sort(key, top, scratch);
   }
   // Within a run (in index order), each point that equals an earlier head joins the earliest
@@ -80,8 +88,8 @@ Coincident find_coincident(const PointCloud& input) {
       is_head.assign(e - b, 1);
       for (std::size_t k = b + 1; k < e; ++k)
         for (std::size_t q = b; q < k; ++q)
-          if (is_head[q - b] && same(key[q].second, key[k].second)) {
-            copies.emplace_back(key[k].second, key[q].second);
+          if (is_head[q - b] && same(id(key[q]), id(key[k]))) {
+            copies.emplace_back(id(key[k]), id(key[q]));
             is_head[k - b] = 0;
             break;
           }

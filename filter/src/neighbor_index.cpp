@@ -11,6 +11,7 @@
 #include <nanoflann.hpp>
 #include <utility>
 
+#include "fill_later.h"
 #include "parallel.h"
 #include "radix_sort.h"
 
@@ -102,7 +103,7 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
     std::uint64_t morton;
     std::uint64_t id;
   };
-  std::vector<Entry> entries(n);
+  detail::FillLaterVector<Entry> entries(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i < r.end(); ++i) {
@@ -113,7 +114,7 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
                     });
   // By Morton code, then id (the entries start in id order, and the sort is stable).
   {
-    std::vector<Entry> scratch;
+    detail::FillLaterVector<Entry> scratch;
     detail::stable_radix_sort(
         entries, [](const Entry& e) { return e.morton; }, scratch);
   }
@@ -137,7 +138,7 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
       keys.push_back(detail::cell_key(coords(p, 0), coords(p, 1), coords(p, 2)));
     }
   }
-  std::vector<Entry>().swap(entries);
+  detail::FillLaterVector<Entry>().swap(entries);
   cell_begin_.push_back(static_cast<std::uint32_t>(n));
   std::size_t cap = 16;
   while (cap < 2 * keys.size()) cap *= 2;

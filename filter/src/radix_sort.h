@@ -16,9 +16,10 @@ namespace scanclean::detail {
 //! Sorts v by key(record) (std::uint64_t), stably. `scratch` is resized and left unspecified.
 //! Large arrays are counted and scattered in parallel, chunk by chunk (each chunk's records go
 //! after those of the earlier chunks with the same digit): a stable sort has one result, so it
-//! does not depend on the chunks or the thread count.
-template <class T, class Key>
-void stable_radix_sort(std::vector<T>& v, Key&& key, std::vector<T>& scratch) {
+//! does not depend on the chunks or the thread count. Vec: a std::vector of the records, with
+//! any allocator (FillLaterVector: the scratch is not zeroed before the first scatter).
+template <class Vec, class Key>
+void stable_radix_sort(Vec& v, Key&& key, Vec& scratch) {
   const std::size_t n = v.size();
   constexpr std::size_t kChunk = std::size_t{1} << 16;
   const std::size_t chunks = std::clamp<std::size_t>(n / kChunk, 1, 64);

@@ -73,6 +73,11 @@ TEST(InputGroupsTest, CoincidentGroupsMatchAMapOfPositions) {
   PointCloud distinct;
   for (int i = 0; i < 1000; ++i) distinct.positions.push_back({u(rng), u(rng), u(rng)});
   EXPECT_FALSE(detail::find_coincident(distinct).any());
+  // No points, and one.
+  EXPECT_FALSE(detail::find_coincident(PointCloud{}).any());
+  PointCloud one;
+  one.positions.push_back({0.5, -0.25, 2.0});
+  EXPECT_FALSE(detail::find_coincident(one).any());
 }
 
 TEST(InputGroupsTest, CoincidentCopiesFollowTheirPoint) {
