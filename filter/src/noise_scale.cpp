@@ -87,9 +87,9 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     so.crease.k_min = o.k_min;
     so.crease.eigen_floor = o.eigen_floor;
     ns.reach = std::max(ns.reach, so.radii.back() * 1.0001);
-    const NeighborIndex wide(pf, so.radii.back() * 0.7);
+    ns.test_grid = std::make_unique<NeighborIndex>(pf, so.radii.back() * 1.001);
     const std::vector<double> radii =
-        select_scale(in.p, wide, test_samples, so, &ns.crease_samples);
+        select_scale(in.p, *ns.test_grid, test_samples, so, &ns.crease_samples);
     h = median_of(radii);
     if (o.scale_regions > 0) {
       // A scale per region: each point's h_i from the radii chosen nearest to its cell of

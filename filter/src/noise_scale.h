@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 #include "neighbor_index.h"
@@ -38,6 +39,10 @@ struct NoiseScale {
   double reach = 0;    //!< the largest query radius used around a sample
   //! the scale test's samples whose radius its crease test raised (ScaleSelectionOptions::crease)
   std::size_t crease_samples = 0;
+  //! The scale test's grid over every point of pf: cells of 1.001 x its largest radius, the
+  //! cells the later phases want when h comes out at that radius (then they take it instead of
+  //! building the same grid again). Null without the scale test.
+  std::unique_ptr<NeighborIndex> test_grid;
 };
 
 //! The noise fixed point over `sigma_samples` and the scale test over `test_samples` (indices

@@ -38,6 +38,7 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
   double h = 0;
   const int K = o.scale == ScaleMode::kAdaptive ? o.k_adaptive : o.k_h;
   const double fallback_h = diag > 0 ? 1e-3 * diag : 1e-3;
+  std::unique_ptr<NeighborIndex> test_grid;  // the scale test's (NoiseScale::test_grid)
   if (o.scale == ScaleMode::kFixed) {
     h = o.h;
   } else {
@@ -111,13 +112,14 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       std::vector<std::size_t> sig_samples, queries;
       for (std::size_t k = 0; k < M / sig_step; ++k) sig_samples.push_back(sample[k * sig_step]);
       for (std::size_t k = 0; k < M; k += sig_step) queries.push_back(sample[k]);
-      const NoiseScale ns =
+      NoiseScale ns =
           noise_scale(in, pf, *sr.index, sig_samples, queries, h0, diag, use_sensor_normals, o);
       sr.noise_sigma_h0 = ns.noise_sigma_h0;
       sr.noise_sigma = ns.noise_sigma;
       sr.h_noise = ns.h_noise;
       sr.crease_samples = ns.crease_samples;
       h = ns.h;
+      test_grid = std::move(ns.test_grid);
     } else {
       std::vector<float> hi(N);
       // Cell by cell: the points of the 27 cells around a cell are copied once into a compact
@@ -300,8 +302,14 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
     std::nth_element(at, at_k, q.end());  // above the 99th percentile: the same set
     sr.h_grid_kernels = std::clamp(static_cast<double>(*at_k), sr.h_grid, 1.7 * h);
   }
+  // The grid the later phases use: cells of 1.001 to 1.7 h_grid, else they build their own of
+  // 1.001 h_grid. The scale test's grid serves only when it is that very grid (h_grid is its
+  // largest radius): a grid of other cells would move the thinned kernels' sites (kernel_sites.h)
+  // and so the output.
   if (sr.index && !(sr.index->cell() >= sr.h_grid * 1.001 && sr.index->cell() <= sr.h_grid * 1.7))
     sr.index.reset();
+  if (!sr.index && test_grid && test_grid->cell() == sr.h_grid * 1.001)
+    sr.index = std::move(test_grid);
   return sr;
 }
 

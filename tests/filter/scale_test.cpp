@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "scanclean/core/errors.h"
 #include "scanclean/filter/robust_filter.h"
@@ -121,6 +122,39 @@ TEST(ScaleTest, AutomaticH0IsTheMedianKthNeighbourDistance) {
   EXPECT_NEAR(s.h0, kd[(kd.size() - 1) / 2], 1e-7);
   EXPECT_NEAR(s.noise_sigma, 0.0, 1e-6);
   EXPECT_EQ(s.h, s.h0);  // no noise to raise it
+}
+
+// On a noisy plane the scale test takes its largest ball, so h is that radius and its grid
+// (cells of 1.001 h) is the one the later phases want: it is handed on, and it is the very grid
+// they would have built (the same slots). On a small sphere the test takes a smaller ball, and
+// no grid of other cells is handed on (it would move the thinned kernels' sites).
+TEST(ScaleTest, TheScaleTestsGridIsHandedOnOnlyWhenItIsTheGridWanted) {
+  {
+    Input x = input_of(test::noisy_plane(20000, 1.0, 0.02, 68));
+    FilterOptions o;
+    const ScaleChoice s = choose_scale(x.in, x.pf, 1.5, false, o);
+    ASSERT_GT(s.h, 1.3 * s.h_noise);  // the largest ball, sqrt(2) h_noise
+    ASSERT_NE(s.index, nullptr);
+    EXPECT_EQ(s.index->cell(), s.h_grid * 1.001);
+    const NeighborIndex fresh(x.pf, s.h_grid * 1.001);
+    EXPECT_EQ(s.index->order(), fresh.order());
+    ASSERT_EQ(s.index->cell_count(), fresh.cell_count());
+    for (std::size_t c = 0; c <= fresh.cell_count(); ++c)
+      ASSERT_EQ(s.index->cell_begin(c), fresh.cell_begin(c)) << c;
+  }
+  {
+    Input x = input_of(test::noisy_sphere(20000, 0.05, 0.003, 69));
+    FilterOptions o;
+    const ScaleChoice s = choose_scale(x.in, x.pf, 0.18, false, o);
+    ASSERT_LT(s.h, 1.3 * s.h_noise);  // a smaller ball than the largest
+    const double test_cell = s.h_noise * std::pow(2.0, 2 / 4.0) * 1.001;  // noise_scale.cpp
+    ASSERT_LE(test_cell, s.h_grid * 1.7);  // within the range a grid may serve in
+    if (s.index) {
+      EXPECT_NE(s.index->cell(), test_cell);
+      EXPECT_GE(s.index->cell(), s.h_grid * 1.001);
+      EXPECT_LE(s.index->cell(), s.h_grid * 1.7);
+    }
+  }
 }
 
 // The median K-th neighbour distance stays exact when part of the samples, far sparser than the
