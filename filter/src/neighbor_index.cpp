@@ -63,7 +63,16 @@ struct NeighborIndex::Tree {
   KdTree tree;
 };
 
-NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
+NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f>&& points, double cell) {
+  build(points, &points, cell);
+}
+
+NeighborIndex::NeighborIndex(const std::vector<Eigen::Vector3f>& points, double cell) {
+  build(points, nullptr, cell);
+}
+
+void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
+                          std::vector<Eigen::Vector3f>* owned, double cell) {
   assert(cell >= 0);
   const std::size_t n = points.size();
   cell_ = cell;
@@ -73,7 +82,10 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
   }
   if (cell <= 0) {  // tree only
     grid_ = false;
-    pts_ = std::move(points);
+    if (owned)
+      pts_ = std::move(*owned);
+    else
+      pts_ = points;
     ids_.resize(n);
     for (std::size_t i = 0; i < n; ++i) ids_[i] = static_cast<std::uint32_t>(i);
     inv_ = ids_;
@@ -129,7 +141,7 @@ NeighborIndex::NeighborIndex(std::vector<Eigen::Vector3f> points, double cell) {
                         pts_[s] = points[entries[s].id];
                       }
                     });
-  std::vector<Eigen::Vector3f>().swap(points);
+  if (owned) std::vector<Eigen::Vector3f>().swap(*owned);
   std::vector<std::uint64_t> keys;
   for (std::size_t s = 0; s < n; ++s) {
     if (s == 0 || entries[s].morton != entries[s - 1].morton) {

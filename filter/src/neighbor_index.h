@@ -23,7 +23,10 @@ class NeighborIndex {
   //! metres (choose about the typical query radius). The cell is enlarged if the extent would
   //! need more than 2^21 cells per axis. Non-finite coordinates are not allowed (assert).
   //! Construction runs in the caller's TBB arena; the result does not depend on the thread count.
-  NeighborIndex(std::vector<Eigen::Vector3f> points, double cell);
+  //! This overload takes the array over and frees it during the build (lower peak memory).
+  NeighborIndex(std::vector<Eigen::Vector3f>&& points, double cell);
+  //! The same index over an array the caller keeps (read, not copied).
+  NeighborIndex(const std::vector<Eigen::Vector3f>& points, double cell);
   ~NeighborIndex();
   NeighborIndex(const NeighborIndex&) = delete;
   NeighborIndex& operator=(const NeighborIndex&) = delete;
@@ -122,6 +125,10 @@ class NeighborIndex {
   void tree_within(const Eigen::Vector3f& q, float r,
                    std::vector<std::pair<std::uint32_t, float>>& out) const;
   std::int64_t find_cell(std::uint64_t key) const;  // cell number or -1
+
+  // The constructors' body; `owned` (the array itself, or null) is freed once copied.
+  void build(const std::vector<Eigen::Vector3f>& points, std::vector<Eigen::Vector3f>* owned,
+             double cell);
 
   std::vector<Eigen::Vector3f> pts_;       // sorted in grid order
   std::vector<std::uint32_t> ids_;         // original index of pts_[s]
