@@ -1,5 +1,6 @@
 #include "clustering.h"
 
+#include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -191,34 +192,41 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
       f(j, k, for_each_earlier);
     }
   };
-  // Both passes run in grid order (spatially coherent); the second only over the candidates
-  // that have earlier neighbours at all (after the projection, few of them).
+  // One pass in grid order (spatially coherent): each thread keeps the (candidate, earlier
+  // neighbour, d2) triples it finds, a candidate's all in one thread and in the sweep's order
+  // (few candidates have any after the projection); then the rows are laid out by rank and
+  // filled in that order, whichever thread found them.
+  struct Pair {
+    std::uint32_t k, q;
+    double d2;
+  };
+  tbb::combinable<std::vector<Pair>> found;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nj, kGrain),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        std::vector<Pair>& mine = found.local();
+        sweep(range.begin(), range.end(),
+              [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
+                for_each_earlier([&](std::uint32_t q, double d2) { mine.push_back({k, q, d2}); });
+              });
+      });
   std::vector<std::uint32_t> row(nc + 1, 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nj, kGrain),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      sweep(range.begin(), range.end(),
-                            [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
-                              std::uint32_t m = 0;
-                              for_each_earlier([&](std::uint32_t, double) { ++m; });
-                              row[k + 1] = m;
-                            });
-                    });
+  found.combine_each([&](const std::vector<Pair>& v) {
+    for (const Pair& e : v) ++row[e.k + 1];
+  });
   for (std::size_t k = 0; k < nc; ++k) row[k + 1] += row[k];
   std::vector<std::uint32_t> nb(row[nc]);
   std::vector<double> nb_d2(row[nc]);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nj, kGrain),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      sweep(range.begin(), range.end(),
-                            [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
-                              std::uint32_t m = row[k];
-                              if (m == row[k + 1]) return;
-                              for_each_earlier([&](std::uint32_t q, double d2) {
-                                nb[m] = q;
-                                nb_d2[m] = d2;
-                                ++m;
-                              });
-                            });
-                    });
+  {
+    std::vector<std::uint32_t> fill(row.begin(), row.end() - 1);
+    found.combine_each([&](const std::vector<Pair>& v) {
+      for (const Pair& e : v) {
+        nb[fill[e.k]] = e.q;
+        nb_d2[fill[e.k]] = e.d2;
+        ++fill[e.k];
+      }
+    });
+  }
   // Rounds: a candidate with an earlier representative among its neighbours is a member; one
   // whose earlier neighbours are all members is a representative.
   enum : std::uint8_t { kUndecided, kRep, kMember };

@@ -4,6 +4,7 @@
 #include "../../filter/src/clustering.h"
 
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <random>
@@ -117,16 +118,19 @@ TEST(ClusteringTest, MatchesTheBruteForceOnASurfaceSpanningManyCells) {
     p = d.normalized();
   }
   const double eps = 0.04;  // about 1.4 x the mean spacing (0.046 for 6,000 points)
-  for (bool oriented : {false, true}) {
-    const Clusters got = cluster_points(c.x, c.pr, eps, oriented);
-    const Clusters want = brute_force(c, eps, oriented);
-    ASSERT_EQ(got.seed, want.seed);
-    EXPECT_EQ(got.count, want.count);
-    EXPECT_EQ(got.rep_of, want.rep_of);
-    EXPECT_LT(got.seed.size(), 5000u);  // merged
-    for (std::size_t r = 0; r < want.seed.size(); ++r)
-      EXPECT_LT((got.position[r] - want.position[r]).norm(), 1e-15) << r;
-  }
+  for (bool oriented : {false, true})
+    for (const int threads : {1, 2}) {  // the pairs found by each thread, laid out by rank
+      Clusters got;
+      tbb::task_arena arena(threads);
+      arena.execute([&] { got = cluster_points(c.x, c.pr, eps, oriented); });
+      const Clusters want = brute_force(c, eps, oriented);
+      ASSERT_EQ(got.seed, want.seed) << threads << " threads";
+      EXPECT_EQ(got.count, want.count);
+      EXPECT_EQ(got.rep_of, want.rep_of);
+      EXPECT_LT(got.seed.size(), 5000u);  // merged
+      for (std::size_t r = 0; r < want.seed.size(); ++r)
+        EXPECT_LT((got.position[r] - want.position[r]).norm(), 1e-15) << r;
+    }
 }
 
 TEST(ClusteringTest, MembersAccountForEveryProjectedPoint) {
