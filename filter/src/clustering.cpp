@@ -193,12 +193,11 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     }
   };
   // One pass in grid order (spatially coherent): each thread keeps the (candidate, earlier
-  // neighbour, d2) triples it finds, a candidate's all in one thread and in the sweep's order
-  // (few candidates have any after the projection); then the rows are laid out by rank and
-  // filled in that order, whichever thread found them.
+  // neighbour) pairs it finds, a candidate's all in one thread and in the sweep's order (few
+  // candidates have any after the projection); then the rows are laid out by rank and filled
+  // in that order, whichever thread found them.
   struct Pair {
     std::uint32_t k, q;
-    double d2;
   };
   tbb::combinable<std::vector<Pair>> found;
   tbb::parallel_for(
@@ -207,7 +206,7 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
         std::vector<Pair>& mine = found.local();
         sweep(range.begin(), range.end(),
               [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
-                for_each_earlier([&](std::uint32_t q, double d2) { mine.push_back({k, q, d2}); });
+                for_each_earlier([&](std::uint32_t q, double) { mine.push_back({k, q}); });
               });
       });
   std::vector<std::uint32_t> row(nc + 1, 0);
@@ -216,15 +215,10 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   });
   for (std::size_t k = 0; k < nc; ++k) row[k + 1] += row[k];
   std::vector<std::uint32_t> nb(row[nc]);
-  std::vector<double> nb_d2(row[nc]);
   {
     std::vector<std::uint32_t> fill(row.begin(), row.end() - 1);
     found.combine_each([&](const std::vector<Pair>& v) {
-      for (const Pair& e : v) {
-        nb[fill[e.k]] = e.q;
-        nb_d2[fill[e.k]] = e.d2;
-        ++fill[e.k];
-      }
+      for (const Pair& e : v) nb[fill[e.k]++] = e.q;
     });
   }
   // Rounds: a candidate with an earlier representative among its neighbours is a member; one
@@ -278,7 +272,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     for (std::uint32_t m = row[k]; m < row[k + 1]; ++m) {
       const std::uint32_t r = rep_index[nb[m]];
       if (r == kNone) continue;
-      const double d2 = nb_d2[m];
+      // The sweep's squared distance (neighbour minus candidate, the same doubles).
+      const double d2 = (x[cand[nb[m]]] - x[cand[k]]).squaredNorm();
       if (best == kNone || d2 < best_d2 || (d2 == best_d2 && r < best)) {
         best = r;
         best_d2 = d2;
