@@ -131,9 +131,9 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   std::vector<std::uint32_t>().swap(rank_of);
   const double eps2 = eps * eps;
   // Visits the joining candidates by_cell[j], j in [j0, j1), in order, calling
-  // f(j, for_each_earlier) with for_each_earlier(g) calling g(q, d2) for the earlier neighbours
-  // of j (rank q < its rank, within eps, normals agreeing). The query box [p - eps, p + eps]
-  // meets at most two cells per axis (cells of 6 eps) and so up to four rows of cells along x;
+  // f(j, k, for_each_earlier) (k: j's rank) with for_each_earlier(g) calling g(q) for the earlier
+  // neighbours of j (rank q < its rank, within eps, normals agreeing). The query box [p - eps, p +
+  // eps] meets at most two cells per axis (cells of 6 eps) and so up to four rows of cells along x;
   // each of the nine rows around j's cell has a cursor at the first entry of the cell before
   // j's, which only moves forward as j does (a galloping search), so no cell is looked up.
   auto sweep = [&](std::size_t j0, std::size_t j1, auto&& f) {
@@ -185,7 +185,7 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
               const double d2 = (cell_x[q] - p).squaredNorm();
               if (!(d2 < eps2)) continue;
               if (oriented && !(cell_n[q].dot(cell_n[j]) > 0)) continue;
-              g(rq, d2);
+              g(rq);
             }
           }
       };
@@ -200,15 +200,14 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     std::uint32_t k, q;
   };
   tbb::combinable<std::vector<Pair>> found;
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, nj, kGrain),
-      [&](const tbb::blocked_range<std::size_t>& range) {
-        std::vector<Pair>& mine = found.local();
-        sweep(range.begin(), range.end(),
-              [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
-                for_each_earlier([&](std::uint32_t q, double) { mine.push_back({k, q}); });
-              });
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nj, kGrain),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::vector<Pair>& mine = found.local();
+                      sweep(range.begin(), range.end(),
+                            [&](std::size_t, std::uint32_t k, auto&& for_each_earlier) {
+                              for_each_earlier([&](std::uint32_t q) { mine.push_back({k, q}); });
+                            });
+                    });
   std::vector<std::uint32_t> row(nc + 1, 0);
   found.combine_each([&](const std::vector<Pair>& v) {
     for (const Pair& e : v) ++row[e.k + 1];

@@ -139,7 +139,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   for (std::size_t k = 0; k < m; ++k) centres[k] = records[k].centre();
   ks.index = std::make_unique<NeighborIndex>(
       std::move(centres),
-      (prm.kernel_cell > 0 ? prm.kernel_cell : prm.cell) * prm.gather_factor * 1.001);
+      grid_cell_for((prm.kernel_cell > 0 ? prm.kernel_cell : prm.cell) * prm.gather_factor));
   const auto& order = ks.index->order();
   std::vector<bool> done(m, false);
   for (std::size_t s0 = 0; s0 < m; ++s0) {

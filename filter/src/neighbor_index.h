@@ -258,6 +258,18 @@ bool NeighborIndex::for_each_cell_run(const Eigen::Vector3f& q, float r, F&& f) 
   return true;
 }
 
+//! The grid cell for queries of radius up to r: r and 0.1 % to spare (the cells' float
+//! coordinates round). The filter's grids for queries at a known radius are built with it.
+inline double grid_cell_for(double r) {
+  return r * 1.001;
+}
+//! Whether a grid of this cell serves queries of radius up to r: its cell at least
+//! grid_cell_for(r), so that the 27 cells around a query hold its neighbours, and at most 1.7 r,
+//! so that they do not hold many more.
+inline bool grid_serves(double cell, double r) {
+  return cell >= grid_cell_for(r) && cell <= r * 1.7;
+}
+
 //! A rough median distance from a point to its kk-th nearest (itself counted) at `samples` evenly
 //! spread points p[k n / samples], k < samples: the (kk / step)-th neighbour in a k-d tree over
 //! every step-th point, step = clamp(n / (8 kk), 1, 16). Only to size grids and first query

@@ -87,7 +87,7 @@ NoiseScale noise_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf,
     so.crease.k_min = o.k_min;
     so.crease.eigen_floor = o.eigen_floor;
     ns.reach = std::max(ns.reach, so.radii.back() * 1.0001);
-    ns.test_grid = std::make_unique<NeighborIndex>(pf, so.radii.back() * 1.001);
+    ns.test_grid = std::make_unique<NeighborIndex>(pf, grid_cell_for(so.radii.back()));
     const std::vector<double> radii =
         select_scale(in.p, *ns.test_grid, test_samples, so, &ns.crease_samples);
     h = median_of(radii);

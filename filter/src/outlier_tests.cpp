@@ -90,7 +90,7 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
                 o.remove_small_components)) {
     std::vector<Eigen::Vector3f> rf(R);
     parallel_each(R, [&](std::size_t r) { rf[r] = cl.position[r].cast<float>(); });
-    NeighborIndex ridx(std::move(rf), in.cell * 1.001);
+    NeighborIndex ridx(std::move(rf), grid_cell_for(in.cell));
     // Work in the index's slot order (spatially coherent).
     const std::vector<std::uint32_t>& rord = ridx.order();
     std::vector<std::uint32_t> cnt(R);

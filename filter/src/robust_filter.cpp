@@ -146,7 +146,7 @@ void second_pass(const detail::PointSet& d, const detail::KernelParams& prm, con
     for (std::uint32_t i : sub) d2.w.push_back(d.w[i]);
   if (!d.hi.empty())
     for (std::uint32_t i : sub) d2.hi.push_back(d.hi[i]);
-  auto index2 = std::make_unique<NeighborIndex>(std::move(pf2), prm.cell * 1.001);
+  auto index2 = std::make_unique<NeighborIndex>(std::move(pf2), grid_cell_for(prm.cell));
   std::vector<Eigen::Vector3f> nref2;
   // The sheet refit's and the crease split's triggers compare a kernel's residual spread with
   // the noise sigma. The points here are the first pass's output, whose spread across the
@@ -257,7 +257,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
       (o.scale == ScaleMode::kAuto ? st.h0 : h) / std::sqrt(static_cast<double>(K) / M_PI);
   st.merge_eps = o.merge_eps < 0 ? 0.25 * st.mean_spacing : o.merge_eps;
   std::unique_ptr<NeighborIndex> index = std::move(scale.index);
-  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), scale.h_grid * 1.001);
+  if (!index) index = std::make_unique<NeighborIndex>(std::move(pf), grid_cell_for(scale.h_grid));
   std::vector<Eigen::Vector3f>().swap(pf);
   if (o.scale == ScaleMode::kFixed) detail::check_fixed_scale(*index, h);
   // Spatial sort: everything from here on is stored and processed in grid order.

@@ -104,8 +104,8 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
       double h0 = median_of(kd);
       if (!(h0 > 0)) h0 = fallback_h;  // at least K_h + 1 coincident points
       sr.h0 = h0;
-      if (!(sr.index->cell() >= h0 * 1.001 && sr.index->cell() <= h0 * 1.7))
-        sr.index = std::make_unique<NeighborIndex>(pf, h0 * 1.001);
+      if (!grid_serves(sr.index->cell(), h0))
+        sr.index = std::make_unique<NeighborIndex>(pf, grid_cell_for(h0));
       // Noise fixed point and scale test (noise_scale.h) over every 4th sampled point of large
       // clouds (2,500 fits per step; the median moves by about 1 %).
       const std::size_t sig_step = M >= 4000 ? 4 : 1;
@@ -302,13 +302,12 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
     std::nth_element(at, at_k, q.end());  // above the 99th percentile: the same set
     sr.h_grid_kernels = std::clamp(static_cast<double>(*at_k), sr.h_grid, 1.7 * h);
   }
-  // The grid the later phases use: cells of 1.001 to 1.7 h_grid, else they build their own of
-  // 1.001 h_grid. The scale test's grid serves only when it is that very grid (h_grid is its
-  // largest radius): a grid of other cells would move the thinned kernels' sites (kernel_sites.h)
-  // and so the output.
-  if (sr.index && !(sr.index->cell() >= sr.h_grid * 1.001 && sr.index->cell() <= sr.h_grid * 1.7))
-    sr.index.reset();
-  if (!sr.index && test_grid && test_grid->cell() == sr.h_grid * 1.001)
+  // The grid the later phases use: one that serves h_grid, else they build their own of
+  // grid_cell_for(h_grid). The scale test's grid serves only when it is that very grid (h_grid is
+  // its largest radius): a grid of other cells would move the thinned kernels' sites
+  // (kernel_sites.h) and so the output.
+  if (sr.index && !grid_serves(sr.index->cell(), sr.h_grid)) sr.index.reset();
+  if (!sr.index && test_grid && test_grid->cell() == grid_cell_for(sr.h_grid))
     sr.index = std::move(test_grid);
   return sr;
 }

@@ -23,7 +23,7 @@ TileScale scale_from_neighbourhoods(PointSet& g, const std::vector<std::size_t>&
                                     double diag, bool use_sensor_normals, const FilterOptions& o) {
   std::vector<Eigen::Vector3f> pf(g.p.size());
   parallel_each(g.p.size(), [&](std::size_t i) { pf[i] = g.p[i].cast<float>(); });
-  const NeighborIndex index(pf, h0 * 1.001);
+  const NeighborIndex index(pf, grid_cell_for(h0));
   return noise_scale(g, pf, index, sigma_samples, test_samples, h0, diag, use_sensor_normals, o);
 }
 

@@ -801,13 +801,13 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   // The cell of the in-memory run's kernel-phase point index (scale.h, robust_filter.cpp): the
   // scale phase's index (cell 1.6 r_est, else 1.001 h0) when its cell lies in [1.001 h, 1.7 h],
   // else a new one of cell 1.001 h.
-  double site_cell = gl.h * 1.001;
+  double site_cell = grid_cell_for(gl.h);
   if (want_est) {
     double r_est = detail::median_of(est);
     if (!(r_est > 0)) r_est = fallback_h;
     double c1 = r_est * 1.6;
-    if (!(c1 >= gl.h0 * 1.001 && c1 <= gl.h0 * 1.7)) c1 = gl.h0 * 1.001;
-    if (c1 >= gl.h * 1.001 && c1 <= gl.h * 1.7) site_cell = c1;
+    if (!grid_serves(c1, gl.h0)) c1 = grid_cell_for(gl.h0);
+    if (grid_serves(c1, gl.h)) site_cell = c1;
   }
   const std::uint64_t stride = static_cast<std::uint64_t>(std::max(1, gl.kernel_stride));
   const bool want_sites = stride > 1 && o.scale != ScaleMode::kAdaptive;
