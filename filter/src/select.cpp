@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <vector>
 
 // The loops over points are written once with Google Highway and compiled for every instruction
 // set it targets on the build machine's architecture (x86: AVX-512, AVX2, SSE4, SSSE3 and a
@@ -127,6 +128,44 @@ bool RankSelect(const float* v, std::size_t n, std::size_t k, float* out) {
     }
   }
   return false;
+}
+
+// The bins of kth_smallest_between: b = 63 where t = (v - lower) scale is not below 63 (or NaN),
+// else trunc(t) where t >= 1, else 0; rounded as the scalar map (no fused multiply-add here).
+// bins needs room for n rounded up to a multiple of 8.
+void BinsOf(const float* v, std::size_t n, float lower, float scale, std::uint8_t* bins) {
+  const D d;
+  const hn::RebindToSigned<D> di;
+  const hn::Rebind<std::uint8_t, D> d8;
+  const std::size_t N = hn::Lanes(d);
+  const V lo = hn::Set(d, lower), sc = hn::Set(d, scale);
+  const V one = hn::Set(d, 1.0f), top = hn::Set(d, 63.0f), zero = hn::Zero(d);
+  for (std::size_t j = 0; j < n; j += N) {
+    const V t = hn::Mul(hn::Sub(load(d, v + j, n - j >= N, hn::FirstN(d, n - j)), lo), sc);
+    const V low = hn::IfThenElse(hn::Ge(t, one), t, zero);
+    const V b = hn::IfThenElse(hn::Lt(t, top), low, top);  // NaN: not below 63
+    hn::StoreU(hn::DemoteTo(d8, hn::ConvertTo(di, b)), d8, bins + j);
+  }
+}
+
+// Moves the values of bin b (bins as BinsOf) to the front of v, in order; returns their count.
+std::size_t KeepBin(float* v, const std::uint8_t* bins, std::size_t n, std::uint8_t b) {
+  const D d;
+  const DU du;
+  const hn::Rebind<std::uint8_t, D> d8;
+  const std::size_t N = hn::Lanes(d);
+  const auto want = hn::Set(du, b);
+  std::size_t m = 0, j = 0;
+  // Whole vectors: the store at m <= j ends by j + N, within what was read.
+  for (; j + N <= n; j += N) {
+    const auto keep = hn::Eq(hn::PromoteTo(du, hn::LoadU(d8, bins + j)), want);
+    m += compress_store(hn::LoadU(d, v + j), hn::RebindMask(d, keep), d, v + m);
+  }
+  for (; j < n; ++j) {
+    v[m] = v[j];
+    m += bins[j] == b ? 1 : 0;
+  }
+  return m;
 }
 
 void Band(const float* x, const float* y, const float* z, std::size_t n, const float* q, float lo2,
@@ -288,6 +327,8 @@ HWY_AFTER_NAMESPACE();
 namespace scanclean::detail {
 
 HWY_EXPORT(RankSelect);
+HWY_EXPORT(BinsOf);
+HWY_EXPORT(KeepBin);
 HWY_EXPORT(Within8);
 HWY_EXPORT(Reach8);
 HWY_EXPORT(Loops);
@@ -308,35 +349,30 @@ float kth_smallest_between(float* v, std::size_t n, std::size_t k, float lower, 
   const float scale = static_cast<float>(kBins) / (upper - lower);
   if (n <= kBins || !(upper > lower) || !(scale > 0) || !std::isfinite(scale))
     return kth_smallest_small(v, n, k);
-  // Monotone in x (a difference, a product with a positive constant, then clamped truncation);
-  // NaN goes last.
-  auto bin = [scale, lower](float x) -> std::size_t {
-    const float t = (x - lower) * scale;
-    if (t >= static_cast<float>(kBins - 1) || t != t) return kBins - 1;
-    return t >= 1.0f ? static_cast<std::size_t>(t) : 0;
-  };
+  // The bins (BinsOf): monotone in x (a difference, a product with a positive constant, then
+  // clamped truncation); NaN goes last.
+  thread_local std::vector<std::uint8_t> bins;
+  if (bins.size() < n + 8) bins.resize(2 * n + 8);
+  HWY_DYNAMIC_DISPATCH(BinsOf)(v, n, lower, scale, bins.data());
   // Four interleaved counts, so that runs of values in one bin do not wait on each other's
   // increments.
   std::array<std::array<std::uint32_t, kBins>, 4> counts{};
+  const std::uint8_t* bi = bins.data();
   std::size_t i = 0;
   for (; i + 4 <= n; i += 4) {
-    ++counts[0][bin(v[i])];
-    ++counts[1][bin(v[i + 1])];
-    ++counts[2][bin(v[i + 2])];
-    ++counts[3][bin(v[i + 3])];
+    ++counts[0][bi[i]];
+    ++counts[1][bi[i + 1]];
+    ++counts[2][bi[i + 2]];
+    ++counts[3][bi[i + 3]];
   }
-  for (; i < n; ++i) ++counts[0][bin(v[i])];
+  for (; i < n; ++i) ++counts[0][bi[i]];
   std::array<std::uint32_t, kBins> count;
   for (std::size_t c = 0; c < kBins; ++c)
     count[c] = (counts[0][c] + counts[1][c]) + (counts[2][c] + counts[3][c]);
   std::size_t b = 0, before = 0;
   while (before + count[b] <= k) before += count[b++];
-  std::size_t m = 0;
-  for (std::size_t j = 0; j < n; ++j) {
-    const float x = v[j];
-    v[m] = x;
-    m += bin(x) == b ? 1 : 0;
-  }
+  const std::size_t m =
+      HWY_DYNAMIC_DISPATCH(KeepBin)(v, bins.data(), n, static_cast<std::uint8_t>(b));
   return kth_smallest_small(v, m, k - before);
 }
 

@@ -88,31 +88,42 @@ TEST(SelectTest, SmallSelectionByCountingMatchesNthElement) {
 
 TEST(SelectTest, BetweenMatchesNthElementOnSignedValues) {
   // Moves along the normal (signed, Gaussian, offset) over their own range, as the displacement
-  // test selects them: the median, then the median absolute deviation, each as nth_element.
-  std::mt19937 rng(67);  // seed 67
-  std::normal_distribution<float> g(0.0f, 1.0f);
-  for (int trial = 0; trial < 400; ++trial) {
-    const std::size_t n = 8 + rng() % 400;
-    std::vector<float> v(n);
-    for (auto& x : v) x = 0.01f * g(rng) + 0.003f;
-    for (std::size_t i = 0; i + 1 < n; i += 11) v[i + 1] = v[i];
-    const float lo = *std::min_element(v.begin(), v.end());
-    const float hi = *std::max_element(v.begin(), v.end());
-    std::vector<float> scratch = v;
-    const float median = kth_smallest_between(scratch.data(), n, n / 2, lo, hi);
-    ASSERT_EQ(median, nth(v, n / 2)) << "trial " << trial << " n " << n;
-    std::vector<float> dev(n);
-    for (std::size_t i = 0; i < n; ++i) dev[i] = std::abs(v[i] - median);
-    scratch = dev;
-    EXPECT_EQ(kth_smallest_below(scratch.data(), n, n / 2, std::max(hi - median, median - lo)),
-              nth(dev, n / 2))
-        << "trial " << trial << " n " << n;
-    // A narrower stated range: values outside it go to the end bins, still exact.
-    scratch = v;
-    EXPECT_EQ(kth_smallest_between(scratch.data(), n, n / 3, lo / 2, hi / 2), nth(v, n / 3));
-  }
-  std::vector<float> equal(100, -0.5f);  // an empty range: plain selection
-  EXPECT_EQ(kth_smallest_between(equal.data(), equal.size(), 40, -0.5f, -0.5f), -0.5f);
+  // test selects them: the median, then the median absolute deviation, each as nth_element. On
+  // every vector target (the bins and the kept bin's values are vector loops), sizes with and
+  // without a tail; some trials hold infinities, which go to the end bins.
+  test::for_each_simd_target([&] {
+    std::mt19937 rng(67);  // seed 67
+    std::normal_distribution<float> g(0.0f, 1.0f);
+    const float inf = std::numeric_limits<float>::infinity();
+    for (int trial = 0; trial < 400; ++trial) {
+      const std::size_t n = 8 + rng() % 400;
+      std::vector<float> v(n);
+      for (auto& x : v) x = 0.01f * g(rng) + 0.003f;
+      for (std::size_t i = 0; i + 1 < n; i += 11) v[i + 1] = v[i];
+      const float lo = *std::min_element(v.begin(), v.end());
+      const float hi = *std::max_element(v.begin(), v.end());
+      if (trial % 5 == 0) {
+        v[rng() % n] = inf;
+        v[rng() % n] = -inf;
+      }
+      std::vector<float> scratch = v;
+      const float median = kth_smallest_between(scratch.data(), n, n / 2, lo, hi);
+      ASSERT_EQ(median, nth(v, n / 2)) << "trial " << trial << " n " << n;
+      std::vector<float> dev(n);
+      for (std::size_t i = 0; i < n; ++i) dev[i] = std::abs(v[i] - median);
+      scratch = dev;
+      EXPECT_EQ(kth_smallest_below(scratch.data(), n, n / 2, std::max(hi - median, median - lo)),
+                nth(dev, n / 2))
+          << "trial " << trial << " n " << n;
+      // A narrower stated range: values outside it go to the end bins, still exact.
+      for (std::size_t k : {std::size_t{0}, n / 3, n - 1}) {
+        scratch = v;
+        EXPECT_EQ(kth_smallest_between(scratch.data(), n, k, lo / 2, hi / 2), nth(v, k));
+      }
+    }
+    std::vector<float> equal(100, -0.5f);  // an empty range: plain selection
+    EXPECT_EQ(kth_smallest_between(equal.data(), equal.size(), 40, -0.5f, -0.5f), -0.5f);
+  });
 }
 
 TEST(SelectTest, BandCountsMatchAPlainLoopAndBracketTheKthDistance) {
