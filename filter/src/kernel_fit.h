@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "point_set.h"
@@ -131,12 +132,17 @@ inline Eigen::Vector3f kernel_normal(const KernelFit& fit, bool use_dir, bool or
   return use_dir && n.dot(vi) < 0 ? Eigen::Vector3f(-n) : n;
 }
 
-//! The neighbours of point i of d within h as fit samples, in `set` (padded). `visit(g)` must
-//! call g(j) for a superset of the neighbours (indices into d). With `oriented` and a sensor
-//! normal at i, only neighbours whose sensor normals agree with it (dot > 0.5). `around`
-//! (optional) receives the sum of the sensor normals of the neighbours taken.
+//! A superset of a point's neighbours as an array of indices into d, in the order a visitor
+//! would give them: gather_samples and fit_kernel take it in place of a visitor, and make the
+//! samples in one call where no neighbour needs a test of its own.
+struct IndexSpan {
+  const std::uint32_t* js = nullptr;
+  std::size_t n = 0;
+};
+
+//! gather_samples with a visitor.
 template <class Visit>
-void gather_samples(const PointSet& d, std::size_t i, double h, bool oriented, Visit&& visit,
+void gather_visited(const PointSet& d, std::size_t i, double h, bool oriented, Visit&& visit,
                     FitSampleSet& set, Eigen::Vector3f* around = nullptr) {
   const Eigen::Vector3d pi = d.p[i];
   const double h2 = h * h, inv_h2 = 1.0 / h2;
@@ -166,16 +172,47 @@ void gather_samples(const PointSet& d, std::size_t i, double h, bool oriented, V
   set.pad();
 }
 
+//! The neighbours of point i of d within h as fit samples, in `set` (padded). `visit(g)` must
+//! call g(j) for a superset of the neighbours (indices into d), or visit is an IndexSpan of
+//! them. With `oriented` and a sensor normal at i, only neighbours whose sensor normals agree
+//! with it (dot > 0.5). `around` (optional) receives the sum of the sensor normals of the
+//! neighbours taken.
+template <class Visit>
+void gather_samples(const PointSet& d, std::size_t i, double h, bool oriented, Visit&& visit,
+                    FitSampleSet& set, Eigen::Vector3f* around = nullptr) {
+  if constexpr (std::is_same_v<std::decay_t<Visit>, IndexSpan>) {
+    if (!(oriented && d.has_v(i)) && !(around && !d.v.empty())) {
+      // Every neighbour is taken: the samples in one call, the same ones in the same order.
+      const double h2 = h * h, inv_h2 = 1.0 / h2;
+      if (around) *around = Eigen::Vector3f::Zero();
+      set.n = 0;
+      if (visit.n > set.capacity()) set.reserve(std::max<std::size_t>(256, 2 * visit.n));
+      make_samples(d.p.data(), visit.js, visit.n, d.p[i], h2, inv_h2, set);
+      set.pad();
+      return;
+    }
+    const IndexSpan span = visit;
+    gather_visited(
+        d, i, h, oriented,
+        [span](auto&& g) {
+          for (std::size_t k = 0; k < span.n; ++k) g(span.js[k]);
+        },
+        set, around);
+  } else {
+    gather_visited(d, i, h, oriented, visit, set, around);
+  }
+}
+
 //! The robust weighted PCA of the neighbours of point i of d within h. `visit(g)` must call g(j)
-//! for a superset of the neighbours (indices into d). With `oriented` and a sensor normal at i,
-//! only neighbours whose sensor normals agree with it (dot > 0.5) take part, and the kernel's
-//! normal is the sensor normal (d.v_orients_only: the PCA normal turned to agree with it);
-//! otherwise it is the PCA normal, and with `oriented` in a cloud with sensor normals (a point
-//! that has none of its own) turned to the side the sum of its neighbours' sensor normals
-//! faces. Returns false if fewer than
-//! k_min neighbours remain. `untrimmed` (optional) receives the neighbours as gathered, before
-//! trimming (for the own-plane refit, plane_refit.h); `moments` (optional) their unweighted
-//! moments (for the crease split's first test).
+//! for a superset of the neighbours (indices into d), or visit is an IndexSpan of them. With
+//! `oriented` and a sensor normal at i, only neighbours whose sensor normals agree with it (dot >
+//! 0.5) take part, and the kernel's normal is the sensor normal (d.v_orients_only: the PCA normal
+//! turned to agree with it); otherwise it is the PCA normal, and with `oriented` in a cloud with
+//! sensor normals (a point that has none of its own) turned to the side the sum of its neighbours'
+//! sensor normals faces. Returns false if fewer than k_min neighbours remain. `untrimmed`
+//! (optional) receives the neighbours as gathered, before trimming (for the own-plane refit,
+//! plane_refit.h); `moments` (optional) their unweighted moments (for the crease split's first
+//! test).
 template <class Visit>
 bool fit_kernel(const PointSet& d, std::size_t i, double h, int k_min, bool oriented,
                 double eigen_floor, Visit&& visit, KernelFit& out,

@@ -9,6 +9,8 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <random>
+#include <string>
+#include <vector>
 
 namespace scanclean::detail {
 namespace {
@@ -268,6 +270,61 @@ TEST(KernelFitTest, VectorSamplesEqualTheScalarLoopBitForBit) {
       EXPECT_EQ(v[k].t, r[k].t);
       EXPECT_LT(std::sqrt(r[k].x * r[k].x + r[k].y * r[k].y + r[k].z * r[k].z), h * (1 + 1e-6));
     }
+  }
+}
+
+TEST(KernelFitTest, GatheringFromAnIndexSpanEqualsTheVisitor) {
+  // 700 points around point 0 (some beyond h), half of them with sensor normals that face
+  // every way: from an array of indices (IndexSpan) the same samples, in the same order, bit
+  // for bit, and the same sum of neighbour normals as from a visitor over the same indices;
+  // with and without sensor normals in the cloud, oriented or not, at a point with and without
+  // a normal of its own. The sets start with stale samples of a larger gather.
+  std::mt19937 rng(19);  // seed 19
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double h = 0.02;
+  PointSet d;
+  d.p.push_back(Eigen::Vector3d(3.5, -1.25, 0.75));
+  for (int k = 1; k < 700; ++k)
+    d.p.push_back(d.p[0] + 0.025 * Eigen::Vector3d(u(rng), u(rng), u(rng)));
+  std::vector<std::uint32_t> js;
+  for (std::uint32_t k = 0; k < 700; ++k) js.push_back((k * 211) % 700);
+  auto normals = [&](bool own) {
+    std::vector<Eigen::Vector3f> v(d.p.size(), Eigen::Vector3f::Zero());
+    for (std::size_t k = 1; k < v.size(); k += 2)
+      v[k] = Eigen::Vector3f(u(rng), u(rng), u(rng)).normalized();
+    if (own) v[0] = Eigen::Vector3f(0, 0, 1);
+    return v;
+  };
+  for (int c = 0; c < 4; ++c) {
+    d.v = c == 0 ? std::vector<Eigen::Vector3f>{} : normals(c != 2);
+    for (const bool oriented : {false, true})
+      for (const std::size_t m : {std::size_t{0}, std::size_t{5}, std::size_t{300}, js.size()}) {
+        FitSampleSet a, b;
+        gather_samples(d, 0, h, oriented, IndexSpan{js.data(), js.size()}, a);
+        gather_samples(d, 0, h, oriented, IndexSpan{js.data(), js.size()}, b);  // stale
+        Eigen::Vector3f around_a(9, 9, 9), around_b(7, 7, 7);
+        gather_samples(d, 0, h, oriented, IndexSpan{js.data(), m}, a, &around_a);
+        gather_samples(
+            d, 0, h, oriented,
+            [&](auto&& g) {
+              for (std::size_t k = 0; k < m; ++k) g(js[k]);
+            },
+            b, &around_b);
+        const std::string at = "case " + std::to_string(c) + " oriented " +
+                               std::to_string(oriented) + " m " + std::to_string(m);
+        ASSERT_EQ(a.n, b.n) << at;
+        if (m == js.size()) {
+          EXPECT_GT(a.n, oriented && d.has_v(0) ? 20u : 100u) << at;  // a few face its way
+        }
+        const std::size_t padded = (a.n + kFitLanes - 1) / kFitLanes * kFitLanes;
+        for (std::size_t k = 0; k < padded; ++k) {
+          ASSERT_EQ(a.x[k], b.x[k]) << at << " sample " << k;
+          ASSERT_EQ(a.y[k], b.y[k]) << at << " sample " << k;
+          ASSERT_EQ(a.z[k], b.z[k]) << at << " sample " << k;
+          ASSERT_EQ(a.t[k], b.t[k]) << at << " sample " << k;
+        }
+        EXPECT_EQ(around_a, around_b) << at;
+      }
   }
 }
 
