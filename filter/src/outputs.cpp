@@ -1,5 +1,7 @@
 #include "outputs.h"
 
+#include <tbb/parallel_invoke.h>
+
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -53,9 +55,13 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     PointCloud& out = result.cloud;
     out = select(input, seeds);
     out.grid = OrganizedGrid{};
-    out.normals.resize(kept.size());
-    std::vector<double> L(kept.size()), it(kept.size()), fl(kept.size()), mc(kept.size()),
-        si(kept.size()), dn(kept.size());
+    // The attribute arrays are zeroed as they are made (std::vector): seven arrays of up to 8
+    // bytes a point, zeroed side by side.
+    const std::size_t nk = kept.size();
+    std::vector<double> L, it, fl, mc, si, dn;
+    tbb::parallel_invoke([&] { out.normals.resize(nk); }, [&] { L.resize(nk); },
+                         [&] { it.resize(nk); }, [&] { fl.resize(nk); }, [&] { mc.resize(nk); },
+                         [&] { si.resize(nk); }, [&] { dn.resize(nk); });
     // The representatives and their seeds are scattered over memory: each output point's are
     // fetched a few points ahead (the loads are independent, so they overlap).
     constexpr std::size_t kAhead = 8;
