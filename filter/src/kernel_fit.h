@@ -140,6 +140,14 @@ struct IndexSpan {
   std::size_t n = 0;
 };
 
+//! Appends to set the samples of the points d.p[js[k]], k < m, within h of pi (make_samples),
+//! growing its room first (to at least twice what it holds then).
+inline void append_samples(const PointSet& d, const std::uint32_t* js, std::size_t m,
+                           const Eigen::Vector3d& pi, double h2, double inv_h2, FitSampleSet& set) {
+  if (set.n + m > set.capacity()) set.reserve(std::max<std::size_t>(256, 2 * (set.n + m)));
+  make_samples(d.p.data(), js, m, pi, h2, inv_h2, set);
+}
+
 //! gather_samples with a visitor.
 template <class Visit>
 void gather_visited(const PointSet& d, std::size_t i, double h, bool oriented, Visit&& visit,
@@ -155,8 +163,7 @@ void gather_visited(const PointSet& d, std::size_t i, double h, bool oriented, V
   std::uint32_t js[kBlock];
   std::size_t m = 0;
   auto flush = [&] {
-    if (set.n + m > set.capacity()) set.reserve(std::max<std::size_t>(256, 2 * (set.n + m)));
-    make_samples(d.p.data(), js, m, pi, h2, inv_h2, set);
+    append_samples(d, js, m, pi, h2, inv_h2, set);
     m = 0;
   };
   const bool sum_normals = around && !d.v.empty();
@@ -186,8 +193,7 @@ void gather_samples(const PointSet& d, std::size_t i, double h, bool oriented, V
       const double h2 = h * h, inv_h2 = 1.0 / h2;
       if (around) *around = Eigen::Vector3f::Zero();
       set.n = 0;
-      if (visit.n > set.capacity()) set.reserve(std::max<std::size_t>(256, 2 * visit.n));
-      make_samples(d.p.data(), visit.js, visit.n, d.p[i], h2, inv_h2, set);
+      append_samples(d, visit.js, visit.n, d.p[i], h2, inv_h2, set);
       set.pad();
       return;
     }
