@@ -45,24 +45,38 @@ HWY_INLINE hn::Vec<DV> field(DV d, const CandidateBuffer& b, std::size_t f, std:
   return hn::LoadU(d, b.f[f].data() + j);
 }
 
-// exp(a) for a in [-80, 0]: 2^t with t = a log2(e) = n + f, n = round(t), f in [-0.5, 0.5];
-// Cephes exp2f polynomial.
-HWY_INLINE V vexp(D d, V a) {
+// exp(a[k]) for each of K vectors, a in [-80, 0]: 2^t with t = a log2(e) = n + f,
+// n = round(t), f in [-0.5, 0.5]; Cephes exp2f polynomial. The K vectors go through each
+// operation side by side: their dependency chains (the polynomial's above all) then overlap,
+// where one vector at a time left the processor waiting on their latency.
+template <std::size_t K>
+HWY_INLINE void vexp_n(D d, const V (&a)[K], V (&r)[K]) {
   const DI di;
-  const V t = hn::Mul(a, hn::Set(d, kLog2e));
-  const V tr = hn::Add(t, hn::Set(d, 0.5f));
-  auto n = hn::ConvertTo(di, tr);  // toward zero
+  using VI = hn::Vec<DI>;
+  V t[K], tr[K], f[K], p[K];
+  VI n[K];
+  for (std::size_t k = 0; k < K; ++k) t[k] = hn::Mul(a[k], hn::Set(d, kLog2e));
+  for (std::size_t k = 0; k < K; ++k) tr[k] = hn::Add(t[k], hn::Set(d, 0.5f));
+  for (std::size_t k = 0; k < K; ++k) n[k] = hn::ConvertTo(di, tr[k]);  // toward zero
   // floor: -1 where truncation rounded up
-  n = hn::Add(n, hn::VecFromMask(di, hn::RebindMask(di, hn::Gt(hn::ConvertTo(d, n), tr))));
-  const V f = hn::Sub(t, hn::ConvertTo(d, n));
-  V p = hn::MulAdd(hn::Set(d, 1.535336188319500e-4f), f, hn::Set(d, 1.339887440266574e-3f));
-  p = hn::MulAdd(p, f, hn::Set(d, 9.618437357674640e-3f));
-  p = hn::MulAdd(p, f, hn::Set(d, 5.550332471162809e-2f));
-  p = hn::MulAdd(p, f, hn::Set(d, 2.402264791363012e-1f));
-  p = hn::MulAdd(p, f, hn::Set(d, 6.931472028550421e-1f));
-  p = hn::MulAdd(p, f, hn::Set(d, 1.0f));
-  const V scale = hn::BitCast(d, hn::ShiftLeft<23>(hn::Add(n, hn::Set(di, 127))));
-  return hn::Mul(p, scale);
+  for (std::size_t k = 0; k < K; ++k)
+    n[k] = hn::Add(n[k],
+                   hn::VecFromMask(di, hn::RebindMask(di, hn::Gt(hn::ConvertTo(d, n[k]), tr[k]))));
+  for (std::size_t k = 0; k < K; ++k) f[k] = hn::Sub(t[k], hn::ConvertTo(d, n[k]));
+  for (std::size_t k = 0; k < K; ++k)
+    p[k] = hn::MulAdd(hn::Set(d, 1.535336188319500e-4f), f[k], hn::Set(d, 1.339887440266574e-3f));
+  for (const float c : {9.618437357674640e-3f, 5.550332471162809e-2f, 2.402264791363012e-1f,
+                        6.931472028550421e-1f, 1.0f})
+    for (std::size_t k = 0; k < K; ++k) p[k] = hn::MulAdd(p[k], f[k], hn::Set(d, c));
+  for (std::size_t k = 0; k < K; ++k)
+    r[k] = hn::Mul(p[k], hn::BitCast(d, hn::ShiftLeft<23>(hn::Add(n[k], hn::Set(di, 127)))));
+}
+
+HWY_INLINE V vexp(D d, V a) {
+  const V in[1] = {a};
+  V out[1];
+  vexp_n<1>(d, in, out);
+  return out[0];
 }
 
 // The Mahalanobis e_j = x^T S_j^-1 x and the signed distance d_j = n_j . x of the candidates
@@ -130,6 +144,46 @@ HWY_INLINE double lane_sum(D d, V v) {
   return sum;
 }
 
+// The step's sums (step_impl) in 8 lanes each.
+struct LaneSums {
+  V s, dx, dy, dz, nx, ny, nz, slab;
+};
+
+// Adds the terms of the K vectors of candidates from j on to the sums, one vector after the
+// other (the same operations in the same order for any K; K > 1 overlaps their weights' exp).
+template <std::size_t K>
+HWY_INLINE void add_step_terms(D d, const CandidateBuffer& b, std::size_t j, V emv, V rx, V ry,
+                               V rz, LaneSums& a) {
+  const std::size_t N = hn::Lanes(d);
+  const V inf = hn::Set(d, std::numeric_limits<float>::infinity()), zero = hn::Zero(d);
+  const V floor = hn::Set(d, -80.0f), half = hn::Set(d, 0.5f);
+  const float* e_in = b.f[B::kE].data() + j;
+  V em[K], w[K];
+  for (std::size_t k = 0; k < K; ++k) {
+    em[k] = hn::LoadU(d, e_in + k * N);
+    w[k] = hn::Max(hn::Mul(hn::Sub(emv, em[k]), half), floor);
+  }
+  vexp_n<K>(d, w, w);
+  for (std::size_t k = 0; k < K; ++k) {
+    const std::size_t i = j + k * N;
+    const V om = hn::IfThenElseZero(hn::Lt(em[k], inf), hn::Mul(field(d, b, B::kW, i), w[k]));
+    const V dist = hn::LoadU(d, b.d.data() + i);
+    const V nx = field(d, b, B::kNx, i), ny = field(d, b, B::kNy, i), nz = field(d, b, B::kNz, i);
+    const V od = hn::Mul(om, dist);
+    const V s = hn::MulAdd(nz, rz, hn::MulAdd(ny, ry, hn::Mul(nx, rx)));
+    const V os = hn::IfThenElse(hn::Lt(s, zero), hn::Neg(om), om);     // s_j omega_j
+    const V slab = hn::NegMulAdd(dist, dist, field(d, b, B::kH2, i));  // h2_j - d_j^2
+    a.slab = hn::Add(a.slab, hn::IfThenElseZero(hn::Gt(slab, zero), hn::Mul(om, slab)));
+    a.s = hn::Add(a.s, om);
+    a.dx = hn::MulAdd(od, nx, a.dx);
+    a.dy = hn::MulAdd(od, ny, a.dy);
+    a.dz = hn::MulAdd(od, nz, a.dz);
+    a.nx = hn::MulAdd(os, nx, a.nx);
+    a.ny = hn::MulAdd(os, ny, a.ny);
+    a.nz = hn::MulAdd(os, nz, a.nz);
+  }
+}
+
 // kReuse: e_j (slab-masked) and d_j are already in the buffer, from min_mahalanobis at the same
 // x; only the truncation mask is applied (the same values as computing them again).
 template <bool kReuse>
@@ -142,7 +196,6 @@ HWY_INLINE bool step_impl(CandidateBuffer& b, const float* x, const float* nref,
   V vmin = inf;
   const std::size_t n = b.padded;
   float* e_out = b.f[B::kE].data();
-  float* d_out = b.d.data();
   if constexpr (kReuse) {
     for (std::size_t j = 0; j < n; j += N) {
       const V e = hn::LoadU(d, e_out + j);
@@ -153,38 +206,22 @@ HWY_INLINE bool step_impl(CandidateBuffer& b, const float* x, const float* nref,
   }
   const float emin = kReuse ? hn::GetLane(hn::MinOfLanes(d, vmin)) : store_e_and_d<true>(b, x, t2);
   if (!(emin < std::numeric_limits<float>::infinity())) return false;
-  V as = zero, adx = zero, ady = zero, adz = zero, anx = zero, any = zero, anz = zero, al = zero;
-  const V emv = hn::Set(d, emin), floor = hn::Set(d, -80.0f), half = hn::Set(d, 0.5f);
+  LaneSums a{zero, zero, zero, zero, zero, zero, zero, zero};
+  const V emv = hn::Set(d, emin);
   const V rx = hn::Set(d, nref[0]), ry = hn::Set(d, nref[1]), rz = hn::Set(d, nref[2]);
-  for (std::size_t j = 0; j < n; j += N) {
-    const V em = hn::LoadU(d, e_out + j);
-    const V a = hn::Max(hn::Mul(hn::Sub(emv, em), half), floor);
-    const V om = hn::IfThenElseZero(hn::Lt(em, inf), hn::Mul(field(d, b, B::kW, j), vexp(d, a)));
-    const V dist = hn::LoadU(d, d_out + j);
-    const V nx = field(d, b, B::kNx, j), ny = field(d, b, B::kNy, j), nz = field(d, b, B::kNz, j);
-    const V od = hn::Mul(om, dist);
-    const V s = hn::MulAdd(nz, rz, hn::MulAdd(ny, ry, hn::Mul(nx, rx)));
-    const V os = hn::IfThenElse(hn::Lt(s, zero), hn::Neg(om), om);     // s_j omega_j
-    const V slab = hn::NegMulAdd(dist, dist, field(d, b, B::kH2, j));  // h2_j - d_j^2
-    al = hn::Add(al, hn::IfThenElseZero(hn::Gt(slab, zero), hn::Mul(om, slab)));
-    as = hn::Add(as, om);
-    adx = hn::MulAdd(od, nx, adx);
-    ady = hn::MulAdd(od, ny, ady);
-    adz = hn::MulAdd(od, nz, adz);
-    anx = hn::MulAdd(os, nx, anx);
-    any = hn::MulAdd(os, ny, any);
-    anz = hn::MulAdd(os, nz, anz);
-  }
+  std::size_t j = 0;
+  for (; j + 2 * N <= n; j += 2 * N) add_step_terms<2>(d, b, j, emv, rx, ry, rz, a);
+  for (; j < n; j += N) add_step_terms<1>(d, b, j, emv, rx, ry, rz, a);
   StepSums r;
   r.e_min = emin;
-  r.s = lane_sum(d, as);
-  r.dn[0] = lane_sum(d, adx);
-  r.dn[1] = lane_sum(d, ady);
-  r.dn[2] = lane_sum(d, adz);
-  r.n[0] = lane_sum(d, anx);
-  r.n[1] = lane_sum(d, any);
-  r.n[2] = lane_sum(d, anz);
-  r.slab_sum = lane_sum(d, al);
+  r.s = lane_sum(d, a.s);
+  r.dn[0] = lane_sum(d, a.dx);
+  r.dn[1] = lane_sum(d, a.dy);
+  r.dn[2] = lane_sum(d, a.dz);
+  r.n[0] = lane_sum(d, a.nx);
+  r.n[1] = lane_sum(d, a.ny);
+  r.n[2] = lane_sum(d, a.nz);
+  r.slab_sum = lane_sum(d, a.slab);
   *out = r;
   return true;
 }

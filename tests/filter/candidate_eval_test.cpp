@@ -203,6 +203,70 @@ TEST(CandidateEvalTest, AvxTargetsGiveTheSameStepBitForBit) {
   }
 }
 
+// The step's sums in 8 lanes (AVX2, AVX-512), emulated in scalar float operations: candidate j
+// in lane j mod 8, its terms added in candidate order (std::fma where the loop multiply-adds),
+// each lane's partial sums then added in double in lane order. The loop takes two vectors of
+// candidates at a time where it can; the sums must not depend on that, bit for bit. The e_j
+// and d_j are the ones the step stored in the buffer.
+TEST(CandidateEvalTest, StepSumsEqualALaneByLaneEmulationBitForBit) {
+  using B = CandidateBuffer;
+  const float t2 = 9, slab2 = 1;
+  int compared = 0;
+  for (const std::int64_t target : hwy::SupportedAndGeneratedTargets()) {
+    if (!(target & (HWY_AVX3_DL | HWY_AVX3 | HWY_AVX2))) continue;
+    hwy::SetSupportedTargetsForTest(target);
+    for (int trial = 0; trial < 24; ++trial) {
+      const int n = 1 + trial * 6;  // 1 to 139 candidates: odd and even counts of vectors
+      const std::vector<KernelRecord> k = random_kernels(n, 900 + trial);
+      std::vector<std::uint32_t> slots(n);
+      for (int j = 0; j < n; ++j) slots[j] = static_cast<std::uint32_t>(j);
+      const float origin[3] = {-0.001f, 0.0005f, 0.0f};
+      const float xf[3] = {0.0004f * static_cast<float>(trial % 4), -0.0003f, 0.0002f};
+      const float nref[3] = {0.6f, 0.0f, 0.8f};
+      CandidateBuffer buf;
+      buf.clear();
+      append_records(buf, k.data(), slots.data(), slots.size(), origin, slab2);
+      buf.finish();
+      StepSums s;
+      if (!step_sums(buf, xf, nref, t2, s)) continue;
+      const float inf = std::numeric_limits<float>::infinity();
+      float lane[8][8] = {};  // [sum][lane]: s, dn x y z, n x y z, slab
+      for (std::size_t j = 0; j < buf.padded; ++j) {
+        const float em = buf.f[B::kE][j], dist = buf.d[j];
+        const float a = std::max((s.e_min - em) * 0.5f, -80.0f);
+        const float om = em < inf ? buf.f[B::kW][j] * fast_exp(a) : 0.0f;
+        const float nx = buf.f[B::kNx][j], ny = buf.f[B::kNy][j], nz = buf.f[B::kNz][j];
+        const float od = om * dist;
+        const float sj = std::fma(nz, nref[2], std::fma(ny, nref[1], nx * nref[0]));
+        const float os = sj < 0 ? -om : om;
+        const float slab = std::fma(-dist, dist, buf.f[B::kH2][j]);
+        float* l = &lane[0][j % 8];
+        l[0] += om;
+        l[8] = std::fma(od, nx, l[8]);
+        l[16] = std::fma(od, ny, l[16]);
+        l[24] = std::fma(od, nz, l[24]);
+        l[32] = std::fma(os, nx, l[32]);
+        l[40] = std::fma(os, ny, l[40]);
+        l[48] = std::fma(os, nz, l[48]);
+        l[56] += slab > 0 ? om * slab : 0.0f;
+      }
+      double sum[8] = {};
+      for (int m = 0; m < 8; ++m)
+        for (int l = 0; l < 8; ++l) sum[m] += lane[m][l];
+      EXPECT_EQ(s.s, sum[0]) << "trial " << trial;
+      for (int a = 0; a < 3; ++a) {
+        EXPECT_EQ(s.dn[a], sum[1 + a]) << "trial " << trial << " axis " << a;
+        EXPECT_EQ(s.n[a], sum[4 + a]) << "trial " << trial << " axis " << a;
+      }
+      EXPECT_EQ(s.slab_sum, sum[7]) << "trial " << trial;
+      ++compared;
+    }
+  }
+  hwy::SetSupportedTargetsForTest(0);
+  if (compared == 0) GTEST_SKIP() << "no AVX2 or AVX-512 target on this processor";
+  EXPECT_GT(compared, 20);  // the comparisons were made, not skipped
+}
+
 TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
   test::for_each_simd_target([&] {
     // The oracle: the step sums over every kernel. Dropping the kernels farther from the gather
