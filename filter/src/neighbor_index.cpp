@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cassert>
 #include <cmath>
 #include <limits>
@@ -18,8 +19,10 @@
 namespace scanclean {
 namespace {
 
-std::uint64_t hash_of(std::uint64_t key) {
-  return key * 0x9E3779B97F4A7C15ULL;
+// Fibonacci hashing: the top `bits` of key x 2^64 / phi, which every bit of the key moves
+// (the low bits of the product ignore the key's high bits, its z).
+std::uint64_t hash_of(std::uint64_t key, int bits) {
+  return (key * 0x9E3779B97F4A7C15ULL) >> (64 - bits);
 }
 
 constexpr std::uint64_t kEmpty = ~0ULL;
@@ -155,10 +158,11 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
   std::size_t cap = 16;
   while (cap < 2 * keys.size()) cap *= 2;
   hash_mask_ = cap - 1;
+  hash_bits_ = std::countr_zero(cap);
   hash_keys_.assign(cap, kEmpty);
   hash_cells_.assign(cap, 0);
   for (std::size_t c = 0; c < keys.size(); ++c) {
-    std::uint64_t h = hash_of(keys[c]) >> 20;
+    std::uint64_t h = hash_of(keys[c], hash_bits_);
     while (true) {
       const std::uint64_t slot = h & hash_mask_;
       if (hash_keys_[slot] == kEmpty) {
@@ -212,7 +216,7 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
 NeighborIndex::~NeighborIndex() = default;
 
 std::int64_t NeighborIndex::find_cell(std::uint64_t key) const {
-  std::uint64_t h = hash_of(key) >> 20;
+  std::uint64_t h = hash_of(key, hash_bits_);
   while (true) {
     const std::uint64_t slot = h & hash_mask_;
     const std::uint64_t k = hash_keys_[slot];

@@ -140,6 +140,7 @@ class NeighborIndex {
   std::vector<std::uint64_t> hash_keys_;   // open addressing, ~0 = empty
   std::vector<std::uint32_t> hash_cells_;
   std::uint64_t hash_mask_ = 0;
+  int hash_bits_ = 0;  // log2 of the table's size
   Eigen::Vector3f lo_ = Eigen::Vector3f::Zero();
   double cell_ = 1;
   bool grid_ = true;
