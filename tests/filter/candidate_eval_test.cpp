@@ -240,15 +240,15 @@ TEST(CandidateEvalTest, StepSumsEqualALaneByLaneEmulationBitForBit) {
         const float sj = std::fma(nz, nref[2], std::fma(ny, nref[1], nx * nref[0]));
         const float os = sj < 0 ? -om : om;
         const float slab = std::fma(-dist, dist, buf.f[B::kH2][j]);
-        float* l = &lane[0][j % 8];
-        l[0] += om;
-        l[8] = std::fma(od, nx, l[8]);
-        l[16] = std::fma(od, ny, l[16]);
-        l[24] = std::fma(od, nz, l[24]);
-        l[32] = std::fma(os, nx, l[32]);
-        l[40] = std::fma(os, ny, l[40]);
-        l[48] = std::fma(os, nz, l[48]);
-        l[56] += slab > 0 ? om * slab : 0.0f;
+        const std::size_t l = j % 8;
+        lane[0][l] += om;
+        lane[1][l] = std::fma(od, nx, lane[1][l]);
+        lane[2][l] = std::fma(od, ny, lane[2][l]);
+        lane[3][l] = std::fma(od, nz, lane[3][l]);
+        lane[4][l] = std::fma(os, nx, lane[4][l]);
+        lane[5][l] = std::fma(os, ny, lane[5][l]);
+        lane[6][l] = std::fma(os, nz, lane[6][l]);
+        lane[7][l] += slab > 0 ? om * slab : 0.0f;
       }
       double sum[8] = {};
       for (int m = 0; m < 8; ++m)
