@@ -60,15 +60,16 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
         by_slot ? idx.slot_point(i) : idx.point(static_cast<std::uint32_t>(i));
     KernelFit fit;
     const float r = static_cast<float>(h * 1.0001);
-    // The neighbours: by slot through the cell cache, as an array (valid until the thread's
+    // f(neighbours): by slot through the cell cache, as an array (valid until the thread's
     // next cell query; the same slots in the same order as the index's query); by point id
     // through the index's query.
-    auto slots = [&] {
-      const auto [js, m] = thread_cell_select().slots_within(idx, cell_key, qi, r);
-      return IndexSpan{js, m};
-    };
-    auto visit = [&](auto&& g) {
-      idx.for_each_within(qi, r, [&](std::uint32_t j, float) { g(j); });
+    auto with_neighbours = [&](auto&& f) {
+      if (by_slot) {
+        const auto [js, m] = thread_cell_select().slots_within(idx, cell_key, qi, r);
+        return f(IndexSpan{js, m});
+      }
+      return f(
+          [&](auto&& g) { idx.for_each_within(qi, r, [&](std::uint32_t j, float) { g(j); }); });
     };
     // With the sheet refit on, most kernels on noisy data ask for it: the neighbours are kept
     // untrimmed from the gather. The crease split alone first tests their unweighted moments
@@ -81,21 +82,18 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     // average: no sheet refit. Normals that only orient (estimated, orient_k) can miss a thin
     // part's other sheet: the refit stays.
     const bool keep = refit.sheets() && !(prm.oriented && !d.v_orients_only);
-    auto fit_with = [&](auto&& neighbours) {
+    const bool ok = with_neighbours([&](auto&& neighbours) {
       return fit_kernel(d, i, h, o.k_min, prm.oriented, o.eigen_floor, neighbours, fit,
                         keep ? &gathered : nullptr, refit.creases() ? &moments : nullptr);
-    };
-    const bool ok = by_slot ? fit_with(slots()) : fit_with(visit);
+    });
     if (!ok) return;
     const bool use_dir = prm.oriented && d.has_v(i);
     std::uint8_t how = 0;
     if (wants_split(fit, refit) && bends_away(moments, fit)) {
       if (!keep) {
         thread_local FitSampleSet again;
-        if (by_slot)
-          gather_samples(d, i, h, prm.oriented, slots(), again);
-        else
-          gather_samples(d, i, h, prm.oriented, visit, again);
+        with_neighbours(
+            [&](auto&& neighbours) { gather_samples(d, i, h, prm.oriented, neighbours, again); });
         gathered.clear();
         again.append_to(gathered);
       }
