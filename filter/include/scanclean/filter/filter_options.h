@@ -86,8 +86,12 @@ struct FilterOptions {
   double truncation_sigma = 3.0;  //!< Phi cut at this many sigma, (0, 10]
   double slab = 1.0;              //!< keep kernel j only if |d_j| < slab h_j, (0, 10]
   double eigen_floor = 0.05;      //!< eigenvalues floored at (eigen_floor h_i)^2, (0, 1]
-  double tolerance = 1e-4;        //!< convergence: step < tolerance h_i, (0, 0.1]
-  int max_iterations = 20;        //!< iteration cap, [1, 255]
+  //! Convergence: |mu| < tolerance h_i, (0, 0.1]. 1e-3; it was the spec's 1e-4 until stop 31.
+  //! Every quality, outlier and real figure of the benchmark came out the same to its printed
+  //! digits, and the 2.1M sphere at k = 250 took 4.79 steps a point instead of 5.71
+  //! (bench/README.md, "Defaults").
+  double tolerance = 1e-3;
+  int max_iterations = 20;  //!< iteration cap, [1, 255]
   UpdateMode update = UpdateMode::kNormal;
   //! 2 = rebuild kernels from the first output and project again, [1, 2]. The second pass's
   //! sheet refit and crease split are triggered against the eigenvalue floor (eigen_floor x h),
