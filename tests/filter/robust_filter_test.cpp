@@ -8,12 +8,12 @@
 #include <cstdio>
 #include <functional>
 #include <limits>
-#include <map>
 #include <numeric>
 #include <random>
 #include <set>
 
 #include "scanclean/core/errors.h"
+#include "support/filter_outputs.h"
 #include "support/synthetic.h"
 
 namespace scanclean {
@@ -145,18 +145,14 @@ TEST(RobustFilterTest, TheDefaultToleranceStopsNearTheTightOnesMaximum) {
   tight.tolerance = 1e-6;
   tight.max_iterations = 100;
   const FilterResult a = robust_filter(c, loose), b = robust_filter(c, tight);
-  std::map<std::size_t, Eigen::Vector3d> at;
-  const auto& src_b = attr(b.cloud, "source_index").values;
-  for (std::size_t k = 0; k < b.cloud.size(); ++k)
-    at[static_cast<std::size_t>(src_b[k])] = b.cloud.positions[k];
-  const auto& src_a = attr(a.cloud, "source_index").values;
+  const auto in_b = test::by_source(b.cloud);
   std::size_t common = 0;
   double max_d = 0, sum_d2 = 0;
-  for (std::size_t k = 0; k < a.cloud.size(); ++k) {
-    const auto it = at.find(static_cast<std::size_t>(src_a[k]));
-    if (it == at.end()) continue;
+  for (const auto& [s, k] : test::by_source(a.cloud)) {
+    const auto it = in_b.find(s);
+    if (it == in_b.end()) continue;
     ++common;
-    const double d = (a.cloud.positions[k] - it->second).norm();
+    const double d = (a.cloud.positions[k] - b.cloud.positions[it->second]).norm();
     max_d = std::max(max_d, d);
     sum_d2 += d * d;
   }

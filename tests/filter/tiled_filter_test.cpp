@@ -9,9 +9,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <map>
 #include <random>
 
+#include "support/filter_outputs.h"
 #include "support/synthetic.h"
 
 namespace scanclean {
@@ -76,17 +76,6 @@ Tiled run_tiled(const PointCloud& c, const FilterOptions& o, std::uint64_t max_t
   return r;
 }
 
-std::map<std::uint32_t, std::size_t> by_source(const PointCloud& c) {
-  std::map<std::uint32_t, std::size_t> m;
-  const Attribute* si = c.find_attribute("source_index");
-  for (std::size_t k = 0; si && k < c.size(); ++k) {
-    const auto s = static_cast<std::uint32_t>(si->values[k]);
-    EXPECT_EQ(m.count(s), 0u) << "source " << s << " twice";
-    m[s] = k;
-  }
-  return m;
-}
-
 struct Diff {
   std::size_t only_one = 0, outlier_diff = 0, flags_differ = 0, moved = 0;
   double largest = 0;  //!< metres
@@ -96,8 +85,8 @@ struct Diff {
 // differ between the in-memory and the tiled result (printed, in units of h).
 Diff compare(const FilterResult& mem, const Tiled& tiled, double h) {
   Diff d;
-  const auto a = by_source(mem.cloud), b = by_source(tiled.cloud);
-  const auto ao = by_source(mem.outliers), bo = by_source(tiled.outliers);
+  const auto a = test::by_source(mem.cloud), b = test::by_source(tiled.cloud);
+  const auto ao = test::by_source(mem.outliers), bo = test::by_source(tiled.outliers);
   // Every input point is an output seed, an outlier or merged, once, in both runs.
   for (const auto& [s, k] : bo) EXPECT_EQ(b.count(s), 0u);
   for (const auto& [s, k] : a) {
