@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "candidate_eval.h"
 #include "cell_select.h"
@@ -82,6 +83,15 @@ void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h, f
   buf.finish();
 }
 
+// The normal of the first candidate whose e_j (buffer.f[kE], from min_mahalanobis) is e_min.
+Eigen::Vector3f best_kernel_normal(const CandidateBuffer& buf, float e_min) {
+  using B = CandidateBuffer;
+  const float* e = buf.f[B::kE].data();
+  std::size_t best = 0;
+  while (best + 1 < buf.count && e[best] != e_min) ++best;
+  return {buf.f[B::kNx][best], buf.f[B::kNy][best], buf.f[B::kNz][best]};
+}
+
 struct PointOutcome {
   float L = 0;
   std::uint8_t iterations = 0;
@@ -103,6 +113,7 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   gather(ctx, of, h, ctx.reach_scale, buf);
   // The first step reuses the e_j and d_j of the off-surface test, at the same position.
   bool first_step_ready = false;
+  float first_e_min = std::numeric_limits<float>::infinity();  // the smallest of those e_j
   if (ctx.off_surface.threshold2 > 0 && buf.count > 0) {
     // Only points the kernels support at all (as the first iteration will check); the others
     // are left to be flagged unsupported. The kernels the steps read (within reach_scale
@@ -112,7 +123,8 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
     const Eigen::Vector3d xl = x - origin;
     const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
                          static_cast<float>(xl.z())};
-    if (min_mahalanobis(buf, xf) < ctx.t2 && !vouched(ctx.off_surface, buf, xl, nref)) {
+    first_e_min = min_mahalanobis(buf, xf);
+    if (first_e_min < ctx.t2 && !vouched(ctx.off_surface, buf, xl, nref)) {
       bool wide_vouched = false;
       if (ctx.first_reach_scale > ctx.reach_scale) {
         thread_local B wide;
@@ -149,6 +161,19 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
   for (int k = 0; k < o.max_iterations; ++k) {
     float xf[3];
     local_position(xf);
+    if (!have_ref) {
+      // No own kernel and no sensor normal: the reference is the normal of the kernel with the
+      // smallest e_j here, chosen before the sums (their normal part depends on it). When no
+      // e_j is below t2, no kernel is kept and the step below says so.
+      if (!first_step_ready) {
+        first_e_min = min_mahalanobis(buf, xf);
+        first_step_ready = true;
+      }
+      if (first_e_min < ctx.t2) {
+        nref = best_kernel_normal(buf, first_e_min);
+        have_ref = true;
+      }
+    }
     StepSums s;
     const bool kept = first_step_ready
                           ? step_sums_after_min_mahalanobis(buf, nref.data(), ctx.t2, s)
@@ -160,14 +185,6 @@ PointOutcome project_point(const ProjectionContext& ctx, Eigen::Vector3d& x, dou
       out.normal = nref;
       x = start;
       return out;
-    }
-    if (!have_ref) {  // no own kernel and no sensor normal: take the best kernel's normal
-      const float* e = buf.f[B::kE].data();
-      std::size_t best = 0;
-      while (best < buf.count && e[best] != s.e_min) ++best;
-      nref = Eigen::Vector3f(buf.f[B::kNx][best], buf.f[B::kNy][best], buf.f[B::kNz][best]);
-      have_ref = true;
-      step_sums(buf, xf, nref.data(), ctx.t2, s);
     }
     L = s.likelihood();
     const Eigen::Vector3d m(s.dn[0] / s.s, s.dn[1] / s.s, s.dn[2] / s.s);

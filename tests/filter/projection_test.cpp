@@ -1,6 +1,7 @@
 // The projection phase (filter/src/projection.h): the secant step of the normal update against
-// the root of a linear normal part (the oracle), its convergence on wide adaptive kernels, and
-// the off-surface decisions against the test over every kernel in reach (brute force).
+// the root of a linear normal part (the oracle), its convergence on wide adaptive kernels, the
+// off-surface decisions against the test over every kernel in reach (brute force), and the
+// reference normal of points without a kernel of their own (the nearest kernel's, brute force).
 
 #include "../../filter/src/projection.h"
 
@@ -152,6 +153,65 @@ TEST(ProjectionTest, OffSurfaceDecisionsMatchTheTestOverEveryKernelInReach) {
   // And the wide gather was needed here: a point only kernels beyond the steps' reach vouch for
   // (1 of the 300 in this cloud).
   EXPECT_GE(vouched_wide, 1u);
+}
+
+TEST(ProjectionTest, PointsWithoutAKernelTakeTheNormalOfTheNearestKernelAsReference) {
+  // Kernels at every 2nd point, no sensor normals: a point without a kernel of its own orients
+  // its sums by the normal of the kernel with the smallest e_j at its input position. The
+  // kernels' normals are flipped at random here, so another kernel's normal would orient about
+  // half of the outputs the other way. Oracle: that kernel found over every kernel within the
+  // candidate radius (brute force); the output normal must face its way.
+  const double h = 0.008;
+  const PointCloud c = test::noisy_plane(3000, 0.1, 0.0005, 47);  // seed 47
+  std::vector<Eigen::Vector3f> pf;
+  for (const auto& p : c.positions) pf.push_back(p.cast<float>());
+  auto index = std::make_unique<NeighborIndex>(pf, h * 1.001);
+  PointSet d;
+  d.h = h;
+  for (std::uint32_t i : index->order()) d.p.push_back(c.positions[i]);
+  FilterOptions o;
+  KernelParams prm;
+  prm.options = &o;
+  prm.cell = h;
+  prm.gather_factor = candidate_radius(o);
+  prm.keep_fits = true;
+  prm.stride = 2;
+  std::vector<Eigen::Vector3f> nref;
+  KernelSet ks = build_kernels(d, index, PointIndexIds::kSlots, prm, nref, "kernels");
+  std::mt19937 rng(53);  // seed 53
+  for (KernelRecord& k : ks.records)
+    if (rng() % 2 == 0)
+      for (int a = 0; a < 3; ++a) k.f[KernelRecord::kNx + a] = -k.f[KernelRecord::kNx + a];
+  std::vector<Eigen::Vector3d> x = d.p;
+  Projected pr;
+  project_all(d, ks, nref, o, true, false, std::vector<std::uint8_t>(d.p.size(), 0), x, pr,
+              "projection");
+  const float r = static_cast<float>(candidate_radius(o) * h);
+  std::size_t checked = 0, facing_up = 0;
+  for (std::size_t i = 0; i < d.p.size(); ++i) {
+    if (nref[i].squaredNorm() > 0 || !projected(pr.state[i])) continue;
+    const Eigen::Vector3f of = d.p[i].cast<float>();
+    const float origin[3] = {of.x(), of.y(), of.z()};
+    CandidateBuffer all;
+    for (std::size_t s = 0; s < ks.records.size(); ++s)
+      if ((ks.index->slot_point(s) - of).norm() < r)
+        all.push_record(static_cast<unsigned>(s), ks.records[s], origin, 1.0f);
+    all.finish();
+    const Eigen::Vector3d xl = d.p[i] - of.cast<double>();
+    const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
+                         static_cast<float>(xl.z())};
+    const float e_min = min_mahalanobis(all, xf);
+    std::size_t best = 0;
+    while (all.f[CandidateBuffer::kE][best] != e_min) ++best;
+    const Eigen::Vector3f nb = ks.records[all.slot[best]].normal();
+    EXPECT_GT(pr.normal[i].dot(nb), 0.9f) << "point " << i;
+    ++checked;
+    facing_up += pr.normal[i].z() > 0 ? 1 : 0;
+  }
+  EXPECT_GT(checked, 1000u);  // about half of the 3,000 points have no kernel
+  // The flips reached the outputs: both orientations occur.
+  EXPECT_GT(facing_up, checked / 4);
+  EXPECT_LT(facing_up, 3 * checked / 4);
 }
 
 }  // namespace
