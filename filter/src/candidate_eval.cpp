@@ -13,6 +13,14 @@
 // processor has runs. The sums run in vectors of 8 floats (kCandidatePadding): AVX2 and AVX-512
 // sum in the same order and give the same results (AVX-512 takes 16 lanes only in the loops
 // without sums); 4-lane targets (SSE4, NEON) sum in another order.
+namespace scanclean::detail {
+// append_records on targets without 16-lane vectors: the AVX2 transposition where the
+// processor has AVX2, else one record at a time (defined below, once).
+void append_records_8(CandidateBuffer& buffer, const KernelRecord* records,
+                      const std::uint32_t* slots, std::size_t n, const float origin[3],
+                      float slab2);
+}  // namespace scanclean::detail
+
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "candidate_eval.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -261,6 +269,77 @@ float FastExp(float a) {
   return hn::GetLane(vexp(d, hn::Set(d, a)));
 }
 
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
+// The transposition of 8 records (16 floats, one vector each) into the buffer's arrays, in
+// three rounds of shuffles: pairs of records interleaved within each block of 4 lanes, then
+// pairs of those, which leaves in block b of u[k] field 4 b + k of records 0-3 (of u[k + 4]:
+// 4-7); then the blocks of u[k] and u[k + 4] paired, so that each half of a vector holds one
+// field of all 8 records. About 4 shuffles a record where the AVX2 transposition takes 6; the
+// records are aligned to their cache line (KernelRecord), so each is one aligned load.
+void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::uint32_t* slots,
+                   std::size_t n, const float* origin, float slab2) {
+  const hn::Full512<float> d16;
+  const hn::Full256<float> d8;
+  const hn::Repartition<std::uint64_t, decltype(d16)> d64;
+  using V16 = hn::Vec<decltype(d16)>;
+  auto lower64 = [&](V16 x, V16 y) {
+    return hn::BitCast(d16, hn::InterleaveLower(d64, hn::BitCast(d64, x), hn::BitCast(d64, y)));
+  };
+  auto upper64 = [&](V16 x, V16 y) {
+    return hn::BitCast(d16, hn::InterleaveUpper(d64, hn::BitCast(d64, x), hn::BitCast(d64, y)));
+  };
+  const auto ox = hn::Set(d8, origin[0]), oy = hn::Set(d8, origin[1]), oz = hn::Set(d8, origin[2]),
+             vslab2 = hn::Set(d8, slab2);
+  for (std::size_t k = 0; k < n; k += 8) {
+    // The last group of fewer than 8 repeats its last record; the lanes past it are written
+    // (append_records reserved room for them) but not counted.
+    const std::size_t j = b.count, m = std::min<std::size_t>(8, n - k);
+    V16 r[8];
+    for (std::size_t i = 0; i < 8; ++i)
+      r[i] = hn::Load(d16, records[slots[k + std::min(i, m - 1)]].f);
+    V16 t[8];
+    for (std::size_t i = 0; i < 8; i += 2) {
+      t[i] = hn::InterleaveLower(d16, r[i], r[i + 1]);
+      t[i + 1] = hn::InterleaveUpper(d16, r[i], r[i + 1]);
+    }
+    V16 u[8];
+    for (std::size_t i = 0; i < 8; i += 4) {
+      u[i] = lower64(t[i], t[i + 2]);
+      u[i + 1] = upper64(t[i], t[i + 2]);
+      u[i + 2] = lower64(t[i + 1], t[i + 3]);
+      u[i + 3] = upper64(t[i + 1], t[i + 3]);
+    }
+    V16 lo[4], hi[4];  // lo[k]: fields k and 8 + k; hi[k]: fields 4 + k and 12 + k
+    for (std::size_t f = 0; f < 4; ++f) {
+      lo[f] = hn::OddEvenBlocks(hn::SwapAdjacentBlocks(u[f + 4]), u[f]);
+      hi[f] = hn::OddEvenBlocks(u[f + 4], hn::SwapAdjacentBlocks(u[f]));
+    }
+    auto put = [&](std::size_t field, hn::Vec<decltype(d8)> v) {
+      hn::StoreU(v, d8, b.f[field].data() + j);
+    };
+    put(B::kCx, hn::Sub(hn::LowerHalf(d8, lo[0]), ox));
+    put(B::kCy, hn::Sub(hn::LowerHalf(d8, lo[1]), oy));
+    put(B::kCz, hn::Sub(hn::LowerHalf(d8, lo[2]), oz));
+    put(B::kQ00, hn::LowerHalf(d8, lo[3]));
+    for (std::size_t f = 0; f < 4; ++f) {
+      put(B::kQ11 + f, hn::LowerHalf(d8, hi[f]));  // fields 4-7: Q11 Q22 Q01 Q02
+      put(B::kQ12 + f, hn::UpperHalf(d8, lo[f]));  // fields 8-11: Q12 and the normal
+    }
+    const auto h2 = hn::UpperHalf(d8, hi[0]);  // record field 12
+    put(B::kSlab2, hn::Mul(h2, vslab2));
+    put(B::kH2, h2);
+    put(B::kW, hn::UpperHalf(d8, hi[1]));  // record field 13
+    for (std::size_t i = 0; i < m; ++i) b.slot[j + i] = slots[k + i];
+    b.count += m;
+  }
+}
+#else
+void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::uint32_t* slots,
+                   std::size_t n, const float* origin, float slab2) {
+  append_records_8(b, records, slots, n, origin, slab2);
+}
+#endif
+
 }  // namespace HWY_NAMESPACE
 }  // namespace scanclean::detail
 HWY_AFTER_NAMESPACE();
@@ -290,6 +369,7 @@ HWY_EXPORT(StepReuse);
 HWY_EXPORT(MinE);
 HWY_EXPORT(Likelihood);
 HWY_EXPORT(FastExp);
+HWY_EXPORT(AppendRecords);
 
 namespace {
 
@@ -374,6 +454,12 @@ double likelihood(CandidateBuffer& buffer, const float x[3], float t2) {
 void append_records(CandidateBuffer& buffer, const KernelRecord* records,
                     const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2) {
   buffer.reserve(buffer.count + n);
+  HWY_DYNAMIC_DISPATCH(AppendRecords)(buffer, records, slots, n, origin, slab2);
+}
+
+void append_records_8(CandidateBuffer& buffer, const KernelRecord* records,
+                      const std::uint32_t* slots, std::size_t n, const float origin[3],
+                      float slab2) {
 #if defined(__x86_64__)
   if (have_avx2()) {
     append_avx2(buffer, records, slots, n, origin, slab2);

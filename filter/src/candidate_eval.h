@@ -84,8 +84,8 @@ struct StepSums {
   double likelihood() const;
 };
 
-//! Appends the kernels records[slots[k]], k < n, with centres relative to origin; on x86 with
-//! AVX2, 8 records at a time by a transposition in registers.
+//! Appends the kernels records[slots[k]], k < n, with centres relative to origin; on x86, 8
+//! records at a time by a transposition in registers (AVX-512 through Highway, else AVX2).
 void append_records(CandidateBuffer& buffer, const KernelRecord* records,
                     const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2);
 

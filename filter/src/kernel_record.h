@@ -12,7 +12,7 @@ namespace scanclean::detail {
 //! deviation sigma_j of S_j. Sixteen floats, read as one cache line and transposed eight at a
 //! time into the candidate buffer (candidate_eval.h); the field order is that buffer's, up to
 //! the weight.
-struct KernelRecord {
+struct alignas(64) KernelRecord {
   static constexpr std::size_t kFloats = 16;
   enum Field : std::size_t {
     kCx,
