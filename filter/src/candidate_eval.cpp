@@ -57,11 +57,12 @@ HWY_INLINE hn::Vec<DV> field(DV d, const CandidateBuffer& b, std::size_t f, std:
 // n = round(t), f in [-0.5, 0.5]; Cephes exp2f polynomial. The K vectors go through each
 // operation side by side: their dependency chains (the polynomial's above all) then overlap,
 // where one vector at a time left the processor waiting on their latency.
-template <std::size_t K>
-HWY_INLINE void vexp_n(D d, const V (&a)[K], V (&r)[K]) {
-  const DI di;
-  using VI = hn::Vec<DI>;
-  V t[K], tr[K], f[K], p[K];
+// The same operations lane by lane for any vector width DV.
+template <std::size_t K, class DV, class VV = hn::Vec<DV>>
+HWY_INLINE void vexp_n(DV d, const VV (&a)[K], VV (&r)[K]) {
+  const hn::RebindToSigned<DV> di;
+  using VI = hn::Vec<decltype(di)>;
+  VV t[K], tr[K], f[K], p[K];
   VI n[K];
   for (std::size_t k = 0; k < K; ++k) t[k] = hn::Mul(a[k], hn::Set(d, kLog2e));
   for (std::size_t k = 0; k < K; ++k) tr[k] = hn::Add(t[k], hn::Set(d, 0.5f));
@@ -192,6 +193,45 @@ HWY_INLINE void add_step_terms(D d, const CandidateBuffer& b, std::size_t j, V e
   }
 }
 
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
+// add_step_terms<2> with 16-lane vectors: the weights and each candidate's terms are formed in
+// one vector (the same operations lane by lane, half as many instructions), and each sum then
+// takes the low 8 lanes and the high 8 in turn, as add_step_terms<2> adds its two vectors: the
+// same sums bit for bit.
+HWY_INLINE void add_step_terms_16(const CandidateBuffer& b, std::size_t j, float emin,
+                                  const float* nref, LaneSums& a) {
+  const hn::Full512<float> dw;
+  const D d;
+  using VW = hn::Vec<decltype(dw)>;
+  const VW inf = hn::Set(dw, std::numeric_limits<float>::infinity()), zero = hn::Zero(dw);
+  const VW em = hn::LoadU(dw, b.f[B::kE].data() + j);
+  VW w[1] = {
+      hn::Max(hn::Mul(hn::Sub(hn::Set(dw, emin), em), hn::Set(dw, 0.5f)), hn::Set(dw, -80.0f))};
+  vexp_n<1>(dw, w, w);
+  const VW om = hn::IfThenElseZero(hn::Lt(em, inf), hn::Mul(field(dw, b, B::kW, j), w[0]));
+  const VW dist = hn::LoadU(dw, b.d.data() + j);
+  const VW nx = field(dw, b, B::kNx, j), ny = field(dw, b, B::kNy, j), nz = field(dw, b, B::kNz, j);
+  const VW od = hn::Mul(om, dist);
+  const VW s = hn::MulAdd(nz, hn::Set(dw, nref[2]),
+                          hn::MulAdd(ny, hn::Set(dw, nref[1]), hn::Mul(nx, hn::Set(dw, nref[0]))));
+  const VW os = hn::IfThenElse(hn::Lt(s, zero), hn::Neg(om), om);      // s_j omega_j
+  const VW slab = hn::NegMulAdd(dist, dist, field(dw, b, B::kH2, j));  // h2_j - d_j^2
+  const VW st = hn::IfThenElseZero(hn::Gt(slab, zero), hn::Mul(om, slab));
+  auto add_half = [&](auto half) {
+    a.slab = hn::Add(a.slab, half(st));
+    a.s = hn::Add(a.s, half(om));
+    a.dx = hn::MulAdd(half(od), half(nx), a.dx);
+    a.dy = hn::MulAdd(half(od), half(ny), a.dy);
+    a.dz = hn::MulAdd(half(od), half(nz), a.dz);
+    a.nx = hn::MulAdd(half(os), half(nx), a.nx);
+    a.ny = hn::MulAdd(half(os), half(ny), a.ny);
+    a.nz = hn::MulAdd(half(os), half(nz), a.nz);
+  };
+  add_half([&](VW v) { return hn::LowerHalf(d, v); });
+  add_half([&](VW v) { return hn::UpperHalf(d, v); });
+}
+#endif
+
 // kReuse: e_j (slab-masked) and d_j are already in the buffer, from min_mahalanobis at the same
 // x; only the truncation mask is applied (the same values as computing them again).
 template <bool kReuse>
@@ -218,7 +258,11 @@ HWY_INLINE bool step_impl(CandidateBuffer& b, const float* x, const float* nref,
   const V emv = hn::Set(d, emin);
   const V rx = hn::Set(d, nref[0]), ry = hn::Set(d, nref[1]), rz = hn::Set(d, nref[2]);
   std::size_t j = 0;
+#if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
+  for (; j + 2 * N <= n; j += 2 * N) add_step_terms_16(b, j, emin, nref, a);
+#else
   for (; j + 2 * N <= n; j += 2 * N) add_step_terms<2>(d, b, j, emv, rx, ry, rz, a);
+#endif
   for (; j < n; j += N) add_step_terms<1>(d, b, j, emv, rx, ry, rz, a);
   StepSums r;
   r.e_min = emin;
