@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 #if defined(__x86_64__)
@@ -334,6 +335,10 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
   };
   const auto ox = hn::Set(d8, origin[0]), oy = hn::Set(d8, origin[1]), oz = hn::Set(d8, origin[2]),
              vslab2 = hn::Set(d8, slab2);
+  // The arrays, read once: through the stores the compiler could not tell that they stay put.
+  float* out[B::kFields];
+  for (std::size_t f = 0; f < B::kFields; ++f) out[f] = b.f[f].data();
+  std::uint32_t* slot_out = b.slot.data();
   for (std::size_t k = 0; k < n; k += 8) {
     // The last group of fewer than 8 repeats its last record; the lanes past it are written
     // (append_records reserved room for them) but not counted.
@@ -359,7 +364,7 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
       hi[f] = hn::OddEvenBlocks(u[f + 4], hn::SwapAdjacentBlocks(u[f]));
     }
     auto put = [&](std::size_t field, hn::Vec<decltype(d8)> v) {
-      hn::StoreU(v, d8, b.f[field].data() + j);
+      hn::StoreU(v, d8, out[field] + j);
     };
     put(B::kCx, hn::Sub(hn::LowerHalf(d8, lo[0]), ox));
     put(B::kCy, hn::Sub(hn::LowerHalf(d8, lo[1]), oy));
@@ -373,7 +378,7 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
     put(B::kSlab2, hn::Mul(h2, vslab2));
     put(B::kH2, h2);
     put(B::kW, hn::UpperHalf(d8, hi[1]));  // record field 13
-    for (std::size_t i = 0; i < m; ++i) b.slot[j + i] = slots[k + i];
+    for (std::size_t i = 0; i < m; ++i) slot_out[j + i] = slots[k + i];
     b.count += m;
   }
 }
@@ -393,9 +398,28 @@ namespace scanclean::detail {
 
 void CandidateBuffer::reserve(std::size_t n) {
   const std::size_t cap = n + 2 * kCandidatePadding;
-  if (f[0].size() >= cap) return;
-  for (auto& a : f) a.resize(cap);
-  d.resize(cap);
+  if (capacity_ >= cap) return;
+  // The 17 arrays lie in one block, 64-byte aligned, each starting 192 bytes further into a
+  // 4 KiB page than the one before. Allocated apart, they started wherever the allocator put
+  // them: where two started at the same offset within a page, the processor took the loads from
+  // one for loads after stores to the other (4K aliasing) and waited, and the same run took up
+  // to twice as long in the append from one start of the program to the next.
+  constexpr std::size_t kPage = 1024, kShift = 48, kAlign = 16;  // floats
+  const std::size_t stride = (cap + kPage - 1) / kPage * kPage + kShift;
+  std::vector<float> block(stride * (kFields + 1) + kAlign);
+  const std::size_t misalign =
+      reinterpret_cast<std::uintptr_t>(block.data()) / sizeof(float) % kAlign;
+  float* base = block.data() + (kAlign - misalign) % kAlign;
+  CandidateArray* arrays[kFields + 1];
+  for (std::size_t k = 0; k < kFields; ++k) arrays[k] = &f[k];
+  arrays[kFields] = &d;
+  for (std::size_t k = 0; k <= kFields; ++k) {
+    float* p = base + k * stride;
+    if (capacity_ > 0) std::copy(arrays[k]->p_, arrays[k]->p_ + capacity_, p);
+    arrays[k]->p_ = p;
+  }
+  block_.swap(block);
+  capacity_ = cap;
   slot.resize(cap);
 }
 

@@ -17,6 +17,19 @@ namespace scanclean::detail {
 //! Struct of arrays, padded with inert entries to a multiple of kCandidatePadding.
 constexpr std::size_t kCandidatePadding = 8;
 
+//! One array of a CandidateBuffer (a field, or the distances): a view into the buffer's block.
+class CandidateArray {
+ public:
+  float& operator[](std::size_t j) { return p_[j]; }
+  float operator[](std::size_t j) const { return p_[j]; }
+  float* data() { return p_; }
+  const float* data() const { return p_; }
+
+ private:
+  friend struct CandidateBuffer;
+  float* p_ = nullptr;
+};
+
 struct CandidateBuffer {
   static constexpr std::size_t kFields = 16;
   enum Field {
@@ -37,11 +50,15 @@ struct CandidateBuffer {
     kW,  // (slab h_j)^2, h_j^2, w_j
     kE   // scratch: masked Mahalanobis e_j
   };
-  std::vector<float> f[kFields];
-  std::vector<float> d;  // scratch: signed distances d_j
+  CandidateArray f[kFields];
+  CandidateArray d;  // scratch: signed distances d_j
   std::size_t count = 0;
   std::size_t padded = 0;
   std::vector<unsigned> slot;  // kernel slot of each candidate
+
+  CandidateBuffer() = default;
+  CandidateBuffer(const CandidateBuffer&) = delete;  // the arrays point into its own block
+  CandidateBuffer& operator=(const CandidateBuffer&) = delete;
 
   void clear() { count = 0; }
   void reserve(std::size_t n);  // capacity for n candidates (+ padding)
@@ -49,7 +66,7 @@ struct CandidateBuffer {
   void push_record(unsigned kernel_slot, const KernelRecord& record, const float origin[3],
                    float slab2) {
     const float* rec = record.f;
-    if (count + kCandidatePadding >= f[0].size()) reserve(2 * count + 64);
+    if (count + kCandidatePadding >= capacity_) reserve(2 * count + 64);
     const std::size_t j = count++;
     f[kCx][j] = rec[0] - origin[0];
     f[kCy][j] = rec[1] - origin[1];
@@ -61,6 +78,10 @@ struct CandidateBuffer {
     slot[j] = kernel_slot;
   }
   void finish();  // pads to a multiple of kCandidatePadding with inert entries
+
+ private:
+  std::vector<float> block_;  // the arrays f and d (reserve)
+  std::size_t capacity_ = 0;  // entries of each array
 };
 
 // The record's fields are the buffer's, up to the normal (append_records copies them as they are).
