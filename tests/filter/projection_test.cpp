@@ -19,6 +19,41 @@
 namespace scanclean::detail {
 namespace {
 
+// The points of c in grid order with their kernels (a kernel at every stride-th point), as the
+// filter builds them before its projection.
+struct Kernelled {
+  PointSet d;
+  KernelSet ks;
+  std::vector<Eigen::Vector3f> nref;  // each point's own kernel normal (zero if none)
+};
+
+Kernelled build(const PointCloud& c, double h, const FilterOptions& o, std::size_t stride = 1) {
+  std::vector<Eigen::Vector3f> pf;
+  for (const auto& p : c.positions) pf.push_back(p.cast<float>());
+  auto index = std::make_unique<NeighborIndex>(pf, h * 1.001);
+  Kernelled k;
+  k.d.h = h;
+  for (std::uint32_t i : index->order()) k.d.p.push_back(c.positions[i]);
+  KernelParams prm;
+  prm.options = &o;
+  prm.cell = h;
+  prm.gather_factor = candidate_radius(o);
+  prm.keep_fits = true;
+  prm.stride = stride;
+  k.ks = build_kernels(k.d, index, PointIndexIds::kSlots, prm, k.nref, "kernels");
+  return k;
+}
+
+// Every kernel whose centre lies within r of q (brute force), relative to q.
+void every_kernel_within(const KernelSet& ks, const Eigen::Vector3f& q, float r,
+                         CandidateBuffer& out) {
+  const float origin[3] = {q.x(), q.y(), q.z()};
+  for (std::size_t s = 0; s < ks.records.size(); ++s)
+    if ((ks.index->slot_point(s) - q).norm() < r)
+      out.push_record(static_cast<unsigned>(s), ks.records[s], origin, 1.0f);
+  out.finish();
+}
+
 TEST(ProjectionTest, NormalStepIsThePlainStepWithoutAPositiveSlope) {
   // The first iterate (no previous step).
   EXPECT_EQ(normal_step(0.3, 0, 0), 0.3);
@@ -93,20 +128,11 @@ TEST(ProjectionTest, OffSurfaceDecisionsMatchTheTestOverEveryKernelInReach) {
   std::mt19937 rng(43);  // seed 43
   std::uniform_real_distribution<double> u(-0.04, 0.04), z(0.0, 0.006);
   for (int k = 0; k < 300; ++k) c.positions.emplace_back(u(rng), u(rng), z(rng));
-  std::vector<Eigen::Vector3f> pf;
-  for (const auto& p : c.positions) pf.push_back(p.cast<float>());
-  auto index = std::make_unique<NeighborIndex>(pf, h * 1.001);
-  PointSet d;
-  d.h = h;
-  for (std::uint32_t i : index->order()) d.p.push_back(c.positions[i]);
-  FilterOptions o;
-  KernelParams prm;
-  prm.options = &o;
-  prm.cell = h;
-  prm.gather_factor = candidate_radius(o);
-  prm.keep_fits = true;
-  std::vector<Eigen::Vector3f> nref;
-  const KernelSet ks = build_kernels(d, index, PointIndexIds::kSlots, prm, nref, "kernels");
+  const FilterOptions o;
+  const Kernelled kd = build(c, h, o);
+  const PointSet& d = kd.d;
+  const KernelSet& ks = kd.ks;
+  const std::vector<Eigen::Vector3f>& nref = kd.nref;
   std::vector<Eigen::Vector3d> x = d.p;
   Projected pr;
   project_all(d, ks, nref, o, true, false, std::vector<std::uint8_t>(d.p.size(), 0), x, pr,
@@ -122,10 +148,7 @@ TEST(ProjectionTest, OffSurfaceDecisionsMatchTheTestOverEveryKernelInReach) {
     const Eigen::Vector3f of = d.p[i].cast<float>();
     const float origin[3] = {of.x(), of.y(), of.z()};
     CandidateBuffer all;
-    for (std::size_t s = 0; s < ks.records.size(); ++s)
-      if ((ks.index->slot_point(s) - of).norm() < r)
-        all.push_record(static_cast<unsigned>(s), ks.records[s], origin, 1.0f);
-    all.finish();
+    every_kernel_within(ks, of, r, all);
     if (all.count == 0) continue;
     const Eigen::Vector3d xl = d.p[i] - of.cast<double>();
     const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
@@ -163,21 +186,11 @@ TEST(ProjectionTest, PointsWithoutAKernelTakeTheNormalOfTheNearestKernelAsRefere
   // candidate radius (brute force); the output normal must face its way.
   const double h = 0.008;
   const PointCloud c = test::noisy_plane(3000, 0.1, 0.0005, 47);  // seed 47
-  std::vector<Eigen::Vector3f> pf;
-  for (const auto& p : c.positions) pf.push_back(p.cast<float>());
-  auto index = std::make_unique<NeighborIndex>(pf, h * 1.001);
-  PointSet d;
-  d.h = h;
-  for (std::uint32_t i : index->order()) d.p.push_back(c.positions[i]);
-  FilterOptions o;
-  KernelParams prm;
-  prm.options = &o;
-  prm.cell = h;
-  prm.gather_factor = candidate_radius(o);
-  prm.keep_fits = true;
-  prm.stride = 2;
-  std::vector<Eigen::Vector3f> nref;
-  KernelSet ks = build_kernels(d, index, PointIndexIds::kSlots, prm, nref, "kernels");
+  const FilterOptions o;
+  Kernelled kd = build(c, h, o, 2);
+  const PointSet& d = kd.d;
+  KernelSet& ks = kd.ks;
+  const std::vector<Eigen::Vector3f>& nref = kd.nref;
   std::mt19937 rng(53);  // seed 53
   for (KernelRecord& k : ks.records)
     if (rng() % 2 == 0)
@@ -191,12 +204,8 @@ TEST(ProjectionTest, PointsWithoutAKernelTakeTheNormalOfTheNearestKernelAsRefere
   for (std::size_t i = 0; i < d.p.size(); ++i) {
     if (nref[i].squaredNorm() > 0 || !projected(pr.state[i])) continue;
     const Eigen::Vector3f of = d.p[i].cast<float>();
-    const float origin[3] = {of.x(), of.y(), of.z()};
     CandidateBuffer all;
-    for (std::size_t s = 0; s < ks.records.size(); ++s)
-      if ((ks.index->slot_point(s) - of).norm() < r)
-        all.push_record(static_cast<unsigned>(s), ks.records[s], origin, 1.0f);
-    all.finish();
+    every_kernel_within(ks, of, r, all);
     const Eigen::Vector3d xl = d.p[i] - of.cast<double>();
     const float xf[3] = {static_cast<float>(xl.x()), static_cast<float>(xl.y()),
                          static_cast<float>(xl.z())};
