@@ -38,9 +38,6 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
 [[gnu::always_inline]] inline V8f load8(const float* p) {
   return *reinterpret_cast<const V8fu*>(p);
 }
-[[gnu::always_inline]] inline void store8(float* p, const V8f& v) {
-  *reinterpret_cast<V8fu*>(p) = v;
-}
 [[gnu::always_inline]] inline void store4(float* p, const V4f& v) {
   *reinterpret_cast<V4fu*>(p) = v;
 }
@@ -126,7 +123,11 @@ SCANCLEAN_AVX2 std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSu
   const V8f lim = V8f{} + p.limit2;
   std::size_t kept = 0;
   for (std::size_t k = 0; k < n; k += kFitLanes) {
-    const V8f x = load8(px + k), y = load8(py + k), z = load8(pz + k);
+    // The loads and stores are written out: Clang rejects a vector returned from a helper
+    // compiled without AVX into this function, compiled with it (an ABI change).
+    const V8f x = *reinterpret_cast<const V8fu*>(px + k),
+              y = *reinterpret_cast<const V8fu*>(py + k),
+              z = *reinterpret_cast<const V8fu*>(pz + k);
     const V8f r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
     const V8i out = r * r > lim;
 #if defined(__x86_64__)
@@ -139,10 +140,10 @@ SCANCLEAN_AVX2 std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSu
     mask &= (1u << valid) - 1;  // the padding is never trimmed, nor kept
     if (mask == 0 && valid == kFitLanes) {
       if (kept != k) {
-        store8(px + kept, x);
-        store8(py + kept, y);
-        store8(pz + kept, z);
-        store8(pt + kept, load8(pt + k));
+        *reinterpret_cast<V8fu*>(px + kept) = x;
+        *reinterpret_cast<V8fu*>(py + kept) = y;
+        *reinterpret_cast<V8fu*>(pz + kept) = z;
+        *reinterpret_cast<V8fu*>(pt + kept) = *reinterpret_cast<const V8fu*>(pt + k);
       }
       kept += kFitLanes;
       continue;
