@@ -12,8 +12,9 @@
 // The loops over a point's candidates are written once with Google Highway and compiled for
 // every instruction set it targets on the build machine's architecture; the best one the
 // processor has runs. The sums run in vectors of 8 floats (kCandidatePadding): AVX2 and AVX-512
-// sum in the same order and give the same results (AVX-512 takes 16 lanes only in the loops
-// without sums); 4-lane targets (SSE4, NEON) sum in another order.
+// sum in the same order and give the same results (AVX-512 takes 16 lanes in the loops without
+// sums, and forms the step's terms 16 at a time before adding them 8 at a time); 4-lane targets
+// (SSE4, NEON) sum in another order.
 namespace scanclean::detail {
 // append_records on targets without 16-lane vectors: the AVX2 transposition where the
 // processor has AVX2, else one record at a time (defined below, once).

@@ -1,8 +1,8 @@
 #pragma once
 //! Internal: the projection's inner loops over a point's candidate kernels, in float SIMD
-//! (Google Highway, dispatched at run time: 8 lanes on AVX2 and AVX-512, 4 on SSE4 and NEON),
-//! with a fast exp. Candidates are held relative to a local origin (the point where they were
-//! gathered) so float keeps full resolution. Per-lane partial sums are combined in double in a
+//! (Google Highway, dispatched at run time: sums in 8 lanes on AVX2 and AVX-512, 4 on SSE4 and
+//! NEON), with a fast exp. Candidates are held relative to a local origin (the point where they
+//! were gathered) so float keeps full resolution. Per-lane partial sums are combined in double in a
 //! fixed order, so results do not depend on threads (they may differ between 8-lane and 4-lane
 //! targets, and with fused multiply-add or without).
 
