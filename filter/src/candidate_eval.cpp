@@ -160,13 +160,48 @@ struct LaneSums {
   V s, dx, dy, dz, nx, ny, nz, slab;
 };
 
+// One vector of candidates' terms of the step (from i on, weights w = exp((e_min - e_j) / 2)),
+// in any vector width: the same operations lane by lane.
+template <class DV, class VV = hn::Vec<DV>>
+struct StepTerms {
+  VV om, od, os, st, nx, ny, nz;  // omega, omega d, s omega, omega max(0, h2 - d^2), n
+};
+template <class DV, class VV = hn::Vec<DV>>
+HWY_INLINE StepTerms<DV> step_terms(DV d, const CandidateBuffer& b, std::size_t i, VV em, VV w,
+                                    VV rx, VV ry, VV rz) {
+  const VV inf = hn::Set(d, std::numeric_limits<float>::infinity()), zero = hn::Zero(d);
+  StepTerms<DV> t;
+  t.om = hn::IfThenElseZero(hn::Lt(em, inf), hn::Mul(field(d, b, B::kW, i), w));
+  const VV dist = hn::LoadU(d, b.d.data() + i);
+  t.nx = field(d, b, B::kNx, i);
+  t.ny = field(d, b, B::kNy, i);
+  t.nz = field(d, b, B::kNz, i);
+  t.od = hn::Mul(t.om, dist);
+  const VV s = hn::MulAdd(t.nz, rz, hn::MulAdd(t.ny, ry, hn::Mul(t.nx, rx)));
+  t.os = hn::IfThenElse(hn::Lt(s, zero), hn::Neg(t.om), t.om);        // s_j omega_j
+  const VV slab = hn::NegMulAdd(dist, dist, field(d, b, B::kH2, i));  // h2_j - d_j^2
+  t.st = hn::IfThenElseZero(hn::Gt(slab, zero), hn::Mul(t.om, slab));
+  return t;
+}
+
+// Adds 8 candidates' terms to the sums.
+HWY_INLINE void accumulate(const StepTerms<D>& t, LaneSums& a) {
+  a.slab = hn::Add(a.slab, t.st);
+  a.s = hn::Add(a.s, t.om);
+  a.dx = hn::MulAdd(t.od, t.nx, a.dx);
+  a.dy = hn::MulAdd(t.od, t.ny, a.dy);
+  a.dz = hn::MulAdd(t.od, t.nz, a.dz);
+  a.nx = hn::MulAdd(t.os, t.nx, a.nx);
+  a.ny = hn::MulAdd(t.os, t.ny, a.ny);
+  a.nz = hn::MulAdd(t.os, t.nz, a.nz);
+}
+
 // Adds the terms of the K vectors of candidates from j on to the sums, one vector after the
 // other (the same operations in the same order for any K; K > 1 overlaps their weights' exp).
 template <std::size_t K>
 HWY_INLINE void add_step_terms(D d, const CandidateBuffer& b, std::size_t j, V emv, V rx, V ry,
                                V rz, LaneSums& a) {
   const std::size_t N = hn::Lanes(d);
-  const V inf = hn::Set(d, std::numeric_limits<float>::infinity()), zero = hn::Zero(d);
   const V floor = hn::Set(d, -80.0f), half = hn::Set(d, 0.5f);
   const float* e_in = b.f[B::kE].data() + j;
   V em[K], w[K];
@@ -175,24 +210,8 @@ HWY_INLINE void add_step_terms(D d, const CandidateBuffer& b, std::size_t j, V e
     w[k] = hn::Max(hn::Mul(hn::Sub(emv, em[k]), half), floor);
   }
   vexp_n<K>(d, w, w);
-  for (std::size_t k = 0; k < K; ++k) {
-    const std::size_t i = j + k * N;
-    const V om = hn::IfThenElseZero(hn::Lt(em[k], inf), hn::Mul(field(d, b, B::kW, i), w[k]));
-    const V dist = hn::LoadU(d, b.d.data() + i);
-    const V nx = field(d, b, B::kNx, i), ny = field(d, b, B::kNy, i), nz = field(d, b, B::kNz, i);
-    const V od = hn::Mul(om, dist);
-    const V s = hn::MulAdd(nz, rz, hn::MulAdd(ny, ry, hn::Mul(nx, rx)));
-    const V os = hn::IfThenElse(hn::Lt(s, zero), hn::Neg(om), om);     // s_j omega_j
-    const V slab = hn::NegMulAdd(dist, dist, field(d, b, B::kH2, i));  // h2_j - d_j^2
-    a.slab = hn::Add(a.slab, hn::IfThenElseZero(hn::Gt(slab, zero), hn::Mul(om, slab)));
-    a.s = hn::Add(a.s, om);
-    a.dx = hn::MulAdd(od, nx, a.dx);
-    a.dy = hn::MulAdd(od, ny, a.dy);
-    a.dz = hn::MulAdd(od, nz, a.dz);
-    a.nx = hn::MulAdd(os, nx, a.nx);
-    a.ny = hn::MulAdd(os, ny, a.ny);
-    a.nz = hn::MulAdd(os, nz, a.nz);
-  }
+  for (std::size_t k = 0; k < K; ++k)
+    accumulate(step_terms(d, b, j + k * N, em[k], w[k], rx, ry, rz), a);
 }
 
 #if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
@@ -205,32 +224,18 @@ HWY_INLINE void add_step_terms_16(const CandidateBuffer& b, std::size_t j, float
   const hn::Full512<float> dw;
   const D d;
   using VW = hn::Vec<decltype(dw)>;
-  const VW inf = hn::Set(dw, std::numeric_limits<float>::infinity()), zero = hn::Zero(dw);
   const VW em = hn::LoadU(dw, b.f[B::kE].data() + j);
   VW w[1] = {
       hn::Max(hn::Mul(hn::Sub(hn::Set(dw, emin), em), hn::Set(dw, 0.5f)), hn::Set(dw, -80.0f))};
   vexp_n<1>(dw, w, w);
-  const VW om = hn::IfThenElseZero(hn::Lt(em, inf), hn::Mul(field(dw, b, B::kW, j), w[0]));
-  const VW dist = hn::LoadU(dw, b.d.data() + j);
-  const VW nx = field(dw, b, B::kNx, j), ny = field(dw, b, B::kNy, j), nz = field(dw, b, B::kNz, j);
-  const VW od = hn::Mul(om, dist);
-  const VW s = hn::MulAdd(nz, hn::Set(dw, nref[2]),
-                          hn::MulAdd(ny, hn::Set(dw, nref[1]), hn::Mul(nx, hn::Set(dw, nref[0]))));
-  const VW os = hn::IfThenElse(hn::Lt(s, zero), hn::Neg(om), om);      // s_j omega_j
-  const VW slab = hn::NegMulAdd(dist, dist, field(dw, b, B::kH2, j));  // h2_j - d_j^2
-  const VW st = hn::IfThenElseZero(hn::Gt(slab, zero), hn::Mul(om, slab));
-  auto add_half = [&](auto half) {
-    a.slab = hn::Add(a.slab, half(st));
-    a.s = hn::Add(a.s, half(om));
-    a.dx = hn::MulAdd(half(od), half(nx), a.dx);
-    a.dy = hn::MulAdd(half(od), half(ny), a.dy);
-    a.dz = hn::MulAdd(half(od), half(nz), a.dz);
-    a.nx = hn::MulAdd(half(os), half(nx), a.nx);
-    a.ny = hn::MulAdd(half(os), half(ny), a.ny);
-    a.nz = hn::MulAdd(half(os), half(nz), a.nz);
+  const auto t = step_terms(dw, b, j, em, w[0], hn::Set(dw, nref[0]), hn::Set(dw, nref[1]),
+                            hn::Set(dw, nref[2]));
+  auto half = [&](auto part) {
+    return StepTerms<D>{part(t.om), part(t.od), part(t.os), part(t.st),
+                        part(t.nx), part(t.ny), part(t.nz)};
   };
-  add_half([&](VW v) { return hn::LowerHalf(d, v); });
-  add_half([&](VW v) { return hn::UpperHalf(d, v); });
+  accumulate(half([&](VW v) { return hn::LowerHalf(d, v); }), a);
+  accumulate(half([&](VW v) { return hn::UpperHalf(d, v); }), a);
 }
 #endif
 
