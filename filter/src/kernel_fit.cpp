@@ -13,7 +13,9 @@
 // the fit's own: the sums in 4 double lanes (docs/ALGORITHM.md section 6), the trimming in 8
 // floats. On x86 they are compiled twice, for AVX2 and for the baseline (SSE2), and chosen at
 // run time; elsewhere once, for the baseline (NEON on ARM). Highway's vectors take the lane
-// count of the target, which would change the sums' order from one processor to another.
+// count of the target, which would change the sums' order from one processor to another; the
+// samples themselves, made point by point with nothing summed across lanes, are made with
+// Highway (make_samples.cpp).
 #if defined(__x86_64__)
 #define SCANCLEAN_AVX2 [[gnu::target("avx2")]]
 #else
@@ -26,7 +28,6 @@ namespace {
 typedef float V8f __attribute__((vector_size(32)));
 typedef int V8i __attribute__((vector_size(32)));
 typedef double V4d __attribute__((vector_size(32)));
-typedef long long V4l __attribute__((vector_size(32)));
 typedef float V4f __attribute__((vector_size(16)));
 // Unaligned stores and loads, through types the compiler knows may sit anywhere.
 typedef float V8fu __attribute__((vector_size(32), aligned(4)));
@@ -37,9 +38,6 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
 }
 [[gnu::always_inline]] inline V8f load8(const float* p) {
   return *reinterpret_cast<const V8fu*>(p);
-}
-[[gnu::always_inline]] inline void store4(float* p, const V4f& v) {
-  *reinterpret_cast<V4fu*>(p) = v;
 }
 
 // Four samples at a time from the padded arrays, widened to double: lane l holds the partial
@@ -166,55 +164,6 @@ SCANCLEAN_AVX2 std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSu
   return kept;
 }
 
-// Four points at a time in double, as the scalar loop, then rounded to float; a block with all
-// four within h is stored with vector stores, the others point by point; the last few (m not a
-// multiple of 4) by the scalar loop itself.
-[[gnu::always_inline]] inline std::size_t make_impl(const Eigen::Vector3d* p,
-                                                    const std::uint32_t* js, std::size_t m,
-                                                    const Eigen::Vector3d& c, double h2,
-                                                    double inv_h2, FitSampleSet& out) {
-  const V4d cx = V4d{} + c.x(), cy = V4d{} + c.y(), cz = V4d{} + c.z();
-  const V4d vh2 = V4d{} + h2, vinv = V4d{} + inv_h2, one = V4d{} + 1.0;
-  float *ox = out.x.data(), *oy = out.y.data(), *oz = out.z.data(), *ot = out.t.data();
-  const std::size_t before = out.n;
-  std::size_t n = out.n, k = 0;
-  for (; k + 4 <= m; k += 4) {
-    const Eigen::Vector3d& a = p[js[k]];
-    const Eigen::Vector3d& b = p[js[k + 1]];
-    const Eigen::Vector3d& e = p[js[k + 2]];
-    const Eigen::Vector3d& f = p[js[k + 3]];
-    const V4d dx = V4d{a.x(), b.x(), e.x(), f.x()} - cx;
-    const V4d dy = V4d{a.y(), b.y(), e.y(), f.y()} - cy;
-    const V4d dz = V4d{a.z(), b.z(), e.z(), f.z()} - cz;
-    const V4d r2 = (dx * dx + dy * dy) + dz * dz;
-    const V4l in = r2 < vh2;
-    V4d t = one - r2 * vinv;
-    t *= t;
-    t *= t;
-    const V4f fx = __builtin_convertvector(dx, V4f), fy = __builtin_convertvector(dy, V4f);
-    const V4f fz = __builtin_convertvector(dz, V4f), ft = __builtin_convertvector(t, V4f);
-    if ((in[0] & in[1] & in[2] & in[3]) != 0) {
-      store4(ox + n, fx);
-      store4(oy + n, fy);
-      store4(oz + n, fz);
-      store4(ot + n, ft);
-      n += 4;
-      continue;
-    }
-    for (int l = 0; l < 4; ++l) {
-      ox[n] = fx[l];
-      oy[n] = fy[l];
-      oz[n] = fz[l];
-      ot[n] = ft[l];
-      n += in[l] != 0 ? 1 : 0;
-    }
-  }
-  out.n = n;
-  // The last few as the scalar loop (make_samples_scalar) makes them.
-  make_samples_scalar(p, js + k, m - k, c, h2, inv_h2, out);
-  return out.n - before;
-}
-
 // AVX2 without FMA: products and sums stay separately rounded, as in the scalar loops.
 SCANCLEAN_AVX2 FitSums sums_avx2(const FitSampleSet& q) {
   return sums_impl(q);
@@ -222,16 +171,6 @@ SCANCLEAN_AVX2 FitSums sums_avx2(const FitSampleSet& q) {
 FitSums sums_sse2(const FitSampleSet& q) {
   return sums_impl(q);
 }
-SCANCLEAN_AVX2 std::size_t make_avx2(const Eigen::Vector3d* p, const std::uint32_t* js,
-                                     std::size_t m, const Eigen::Vector3d& c, double h2,
-                                     double inv_h2, FitSampleSet& out) {
-  return make_impl(p, js, m, c, h2, inv_h2, out);
-}
-std::size_t make_sse2(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
-                      const Eigen::Vector3d& c, double h2, double inv_h2, FitSampleSet& out) {
-  return make_impl(p, js, m, c, h2, inv_h2, out);
-}
-
 // sample_moments' sums: nine moments (x, y, z, xx, yy, zz, xy, xz, yz) in 8 float lanes each,
 // sample k in lane k mod 8 (the padding adds exact zeros); the same operations on every target.
 constexpr std::size_t kMoments = 9;
@@ -372,13 +311,6 @@ std::size_t trim_samples_scalar(FitSampleSet& q, const TrimPlane& plane, FitSums
   q.n = kept;
   q.pad();
   return kept;
-}
-
-std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
-                         const Eigen::Vector3d& centre, double h2, double inv_h2,
-                         FitSampleSet& out) {
-  return have_avx2() ? make_avx2(p, js, m, centre, h2, inv_h2, out)
-                     : make_sse2(p, js, m, centre, h2, inv_h2, out);
 }
 
 std::size_t make_samples_scalar(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,

@@ -97,9 +97,10 @@ std::size_t trim_samples_scalar(FitSampleSet& samples, const TrimPlane& plane, F
 
 //! Appends to out the samples of the points p[js[k]], k < m, within h of `centre` (r2 < h2), in
 //! order: offset p[j] - centre and r2 = (dx dx + dy dy) + dz dz in double, chi weight
-//! t = 1 - r2 inv_h2 squared twice, each rounded to float. out needs room for m more. Four
-//! points at a time with AVX2, with the scalar loop's operations (no fused multiply-add): its
-//! results bit for bit. Returns the count appended (out is not padded).
+//! t = 1 - r2 inv_h2 squared twice, each rounded to float. out needs room for m more. A vector
+//! of points at a time (8 with AVX-512, 4 with AVX2; make_samples.cpp), with the scalar loop's
+//! operations (no fused multiply-add): its results bit for bit on every processor. Returns the
+//! count appended (out is not padded).
 std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
                          const Eigen::Vector3d& centre, double h2, double inv_h2,
                          FitSampleSet& out);
