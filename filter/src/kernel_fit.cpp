@@ -9,13 +9,13 @@
 // compiled for AVX2 or into their SSE2 twins, so the ABI note GCC gives for them does not apply.
 #pragma GCC diagnostic ignored "-Wpsabi"
 
-// The loops are written with the compiler's vector types (GCC and Clang), whose lane counts are
-// the fit's own: the sums in 4 double lanes (docs/ALGORITHM.md section 6), the trimming in 8
-// floats. On x86 they are compiled twice, for AVX2 and for the baseline (SSE2), and chosen at
-// run time; elsewhere once, for the baseline (NEON on ARM). Highway's vectors take the lane
-// count of the target, which would change the sums' order from one processor to another; the
-// samples themselves, made point by point with nothing summed across lanes, are made with
-// Highway (make_samples.cpp).
+// The loops that sum are written with the compiler's vector types (GCC and Clang), whose lane
+// counts are the fit's own: the sums in 4 double lanes (docs/ALGORITHM.md section 6), the
+// moments in 8 floats. On x86 they are compiled twice, for AVX2 and for the baseline (SSE2), and
+// chosen at run time; elsewhere once, for the baseline (NEON on ARM). Highway's vectors take the
+// lane count of the target, which would change the sums' order from one processor to another;
+// the loops over single samples, which sum nothing across lanes (making the samples, trimming
+// them), are written with Highway (fit_sample_loops.cpp).
 #if defined(__x86_64__)
 #define SCANCLEAN_AVX2 [[gnu::target("avx2")]]
 #else
@@ -26,7 +26,6 @@ namespace scanclean::detail {
 namespace {
 
 typedef float V8f __attribute__((vector_size(32)));
-typedef int V8i __attribute__((vector_size(32)));
 typedef double V4d __attribute__((vector_size(32)));
 typedef float V4f __attribute__((vector_size(16)));
 // Unaligned stores and loads, through types the compiler knows may sit anywhere.
@@ -78,22 +77,6 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
   return s;
 }
 
-// The terms of one sample, as fit_sums forms them, taken out of the sums.
-[[gnu::always_inline]] inline void downdate(FitSums& fs, float xf, float yf, float zf, float tf) {
-  const double x = xf, y = yf, z = zf, t = tf;
-  const double tx = t * x, ty = t * y, tz = t * z;
-  fs.s0 -= t;
-  fs.sx -= tx;
-  fs.sy -= ty;
-  fs.sz -= tz;
-  fs.sxx -= tx * x;
-  fs.syy -= ty * y;
-  fs.szz -= tz * z;
-  fs.sxy -= tx * y;
-  fs.sxz -= tx * z;
-  fs.syz -= ty * z;
-}
-
 struct TrimPlaneF {
   float nx, ny, nz, mx, my, mz, limit2;
   explicit TrimPlaneF(const TrimPlane& p)
@@ -109,60 +92,6 @@ struct TrimPlaneF {
     return r * r > limit2;
   }
 };
-
-// One trimming pass: eight residuals at a time; a block with none trimmed is kept whole (moved
-// down with vector stores once something before it was trimmed), the others sample by sample.
-// (Without AVX2 the scalar loop, trim_samples_scalar, is the same pass.)
-SCANCLEAN_AVX2 std::size_t trim_avx2(FitSampleSet& q, const TrimPlaneF& p, FitSums& fs) {
-  float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data(), *pt = q.t.data();
-  const std::size_t n = q.n;
-  const V8f nx = V8f{} + p.nx, ny = V8f{} + p.ny, nz = V8f{} + p.nz;
-  const V8f mx = V8f{} + p.mx, my = V8f{} + p.my, mz = V8f{} + p.mz;
-  const V8f lim = V8f{} + p.limit2;
-  std::size_t kept = 0;
-  for (std::size_t k = 0; k < n; k += kFitLanes) {
-    // The loads and stores are written out: Clang rejects a vector returned from a helper
-    // compiled without AVX into this function, compiled with it (an ABI change).
-    const V8f x = *reinterpret_cast<const V8fu*>(px + k),
-              y = *reinterpret_cast<const V8fu*>(py + k),
-              z = *reinterpret_cast<const V8fu*>(pz + k);
-    const V8f r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
-    const V8i out = r * r > lim;
-#if defined(__x86_64__)
-    unsigned mask = static_cast<unsigned>(__builtin_ia32_movmskps256(reinterpret_cast<V8f>(out)));
-#else
-    unsigned mask = 0;
-    for (int l = 0; l < 8; ++l) mask |= out[l] != 0 ? 1u << l : 0u;
-#endif
-    const std::size_t valid = std::min(kFitLanes, n - k);
-    mask &= (1u << valid) - 1;  // the padding is never trimmed, nor kept
-    if (mask == 0 && valid == kFitLanes) {
-      if (kept != k) {
-        *reinterpret_cast<V8fu*>(px + kept) = x;
-        *reinterpret_cast<V8fu*>(py + kept) = y;
-        *reinterpret_cast<V8fu*>(pz + kept) = z;
-        *reinterpret_cast<V8fu*>(pt + kept) = *reinterpret_cast<const V8fu*>(pt + k);
-      }
-      kept += kFitLanes;
-      continue;
-    }
-    for (std::size_t l = 0; l < valid; ++l) {
-      const std::size_t s = k + l;
-      if (mask & (1u << l)) {
-        downdate(fs, px[s], py[s], pz[s], pt[s]);
-      } else {
-        px[kept] = px[s];
-        py[kept] = py[s];
-        pz[kept] = pz[s];
-        pt[kept] = pt[s];
-        ++kept;
-      }
-    }
-  }
-  q.n = kept;
-  q.pad();
-  return kept;
-}
 
 // AVX2 without FMA: products and sums stay separately rounded, as in the scalar loops.
 SCANCLEAN_AVX2 FitSums sums_avx2(const FitSampleSet& q) {
@@ -289,17 +218,12 @@ FitSums fit_sums_scalar(const FitSampleSet& samples) {
   return s;
 }
 
-std::size_t trim_samples(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums) {
-  const TrimPlaneF p(plane);
-  return have_avx2() ? trim_avx2(samples, p, sums) : trim_samples_scalar(samples, plane, sums);
-}
-
 std::size_t trim_samples_scalar(FitSampleSet& q, const TrimPlane& plane, FitSums& sums) {
   const TrimPlaneF p(plane);
   std::size_t kept = 0;
   for (std::size_t k = 0; k < q.n; ++k) {
     if (p.trims(q.x[k], q.y[k], q.z[k])) {
-      downdate(sums, q.x[k], q.y[k], q.z[k], q.t[k]);
+      downdate_sums(sums, q.x[k], q.y[k], q.z[k], q.t[k]);
       continue;
     }
     q.x[kept] = q.x[k];

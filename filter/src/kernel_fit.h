@@ -72,6 +72,21 @@ struct FitSums {
 FitSums fit_sums(const FitSampleSet& samples);
 //! The scalar reference of fit_sums (tests).
 FitSums fit_sums_scalar(const FitSampleSet& samples);
+//! Takes the terms of one sample, as fit_sums forms them, out of the sums.
+inline void downdate_sums(FitSums& fs, float xf, float yf, float zf, float tf) {
+  const double x = xf, y = yf, z = zf, t = tf;
+  const double tx = t * x, ty = t * y, tz = t * z;
+  fs.s0 -= t;
+  fs.sx -= tx;
+  fs.sy -= ty;
+  fs.sz -= tz;
+  fs.sxx -= tx * x;
+  fs.syy -= ty * y;
+  fs.szz -= tz * z;
+  fs.sxy -= tx * y;
+  fs.sxz -= tx * z;
+  fs.syz -= ty * z;
+}
 
 //! The smallest eigenvalue of the symmetric c and a unit eigenvector of it, by Newton's method
 //! on the characteristic polynomial from below (a few steps; no trigonometry), the vector from
@@ -89,8 +104,9 @@ struct TrimPlane {
 //! Keeps the samples whose residual r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z) has
 //! !(r r > limit2), all in float (the plane rounded to float), moved down in order; takes the
 //! others' terms (fit_sums' products, in double) out of `sums`, in sample order. Returns the
-//! count kept (and sets samples.n to it, padded). Vectorised (eight samples at a time with
-//! AVX2), with the scalar loop's operations: its results bit for bit.
+//! count kept (and sets samples.n to it, padded). Vectorised (16 samples at a time with
+//! AVX-512, 8 with AVX2; fit_sample_loops.cpp), with the scalar loop's operations: its results
+//! bit for bit on every processor.
 std::size_t trim_samples(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums);
 //! The scalar reference of trim_samples (tests).
 std::size_t trim_samples_scalar(FitSampleSet& samples, const TrimPlane& plane, FitSums& sums);
