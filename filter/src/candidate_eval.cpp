@@ -315,6 +315,20 @@ double Likelihood(CandidateBuffer& b, const float* x, float t2) {
   return lane_sum(d, acc);
 }
 
+// The first candidate j < n (n a multiple of the lanes, the padding's e_j never equal) whose
+// e_j is e; n - 1 if none is.
+std::size_t FirstWithE(const CandidateBuffer& b, float e, std::size_t n) {
+  const D d;
+  const std::size_t N = hn::Lanes(d);
+  const V ve = hn::Set(d, e);
+  const float* es = b.f[B::kE].data();
+  for (std::size_t j = 0; j < n; j += N) {
+    const intptr_t l = hn::FindFirstTrue(d, hn::Eq(hn::LoadU(d, es + j), ve));
+    if (l >= 0) return std::min(j + static_cast<std::size_t>(l), b.count - 1);
+  }
+  return b.count - 1;
+}
+
 float FastExp(float a) {
   const D d;
   return hn::GetLane(vexp(d, hn::Set(d, a)));
@@ -443,6 +457,7 @@ HWY_EXPORT(StepReuse);
 HWY_EXPORT(MinE);
 HWY_EXPORT(Likelihood);
 HWY_EXPORT(FastExp);
+HWY_EXPORT(FirstWithE);
 HWY_EXPORT(AppendRecords);
 
 namespace {
@@ -546,6 +561,11 @@ void append_records_8(CandidateBuffer& buffer, const KernelRecord* records,
 
 float fast_exp(float a) {
   return HWY_DYNAMIC_DISPATCH(FastExp)(a);
+}
+
+std::size_t first_candidate_with_e(const CandidateBuffer& buffer, float e) {
+  if (buffer.count == 0) return 0;
+  return HWY_DYNAMIC_DISPATCH(FirstWithE)(buffer, e, buffer.padded);
 }
 
 }  // namespace scanclean::detail

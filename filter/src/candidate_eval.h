@@ -125,6 +125,9 @@ bool step_sums_after_min_mahalanobis(CandidateBuffer& buffer, const float nref[3
 float min_mahalanobis(CandidateBuffer& buffer, const float x[3]);
 //! L(x) = sum w_j exp(-e_j / 2) max(0, h2_j - d_j^2) over kernels with e_j < t2.
 double likelihood(CandidateBuffer& buffer, const float x[3], float t2);
+//! The first candidate whose buffer.f[kE] is e (after min_mahalanobis: e_j, with +inf where the
+//! slab test fails), or the last candidate if none is; 0 for an empty buffer. Needs finish().
+std::size_t first_candidate_with_e(const CandidateBuffer& buffer, float e);
 //! exp(a) for a in [-80, 0] with the same fast exp the loops use (relative error below 5e-7 on
 //! [-10, 0], where the loops use it; up to 4e-6 towards -80, from rounding a log2(e) in float).
 float fast_exp(float a);

@@ -86,9 +86,7 @@ void gather(const ProjectionContext& ctx, const Eigen::Vector3f& of, double h, f
 // The normal of the first candidate whose e_j (buffer.f[kE], from min_mahalanobis) is e_min.
 Eigen::Vector3f best_kernel_normal(const CandidateBuffer& buf, float e_min) {
   using B = CandidateBuffer;
-  const float* e = buf.f[B::kE].data();
-  std::size_t best = 0;
-  while (best + 1 < buf.count && e[best] != e_min) ++best;
+  const std::size_t best = first_candidate_with_e(buf, e_min);
   return {buf.f[B::kNx][best], buf.f[B::kNy][best], buf.f[B::kNz][best]};
 }
 

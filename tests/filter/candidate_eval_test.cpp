@@ -353,6 +353,33 @@ TEST(CandidateEvalTest, TransposedAppendEqualsAppendingOneByOne) {
   });
 }
 
+TEST(CandidateEvalTest, FirstCandidateWithEIsTheFirstThatEqualsIt) {
+  // The oracle: a plain search over the buffer's e_j. Each value is asked for, with some repeated
+  // further on (the first one counts) and in every lane of a vector, on every target; a value
+  // that is not there gives the last candidate.
+  const std::vector<KernelRecord> k = random_kernels(37, 9);
+  std::vector<std::uint32_t> slots(k.size());
+  for (std::uint32_t j = 0; j < slots.size(); ++j) slots[j] = j;
+  const float origin[3] = {0, 0, 0}, x[3] = {0.001f, -0.002f, 0.0005f};
+  test::for_each_simd_target([&] {
+    CandidateBuffer buf;
+    buf.clear();
+    append_records(buf, k.data(), slots.data(), slots.size(), origin, 1.0f);
+    buf.finish();
+    min_mahalanobis(buf, x);
+    float* e = buf.f[CandidateBuffer::kE].data();
+    e[20] = e[3];
+    e[36] = e[17];
+    for (std::size_t j = 0; j < buf.count; ++j) {
+      std::size_t first = 0;
+      while (e[first] != e[j]) ++first;
+      ASSERT_EQ(first_candidate_with_e(buf, e[j]), first) << "candidate " << j;
+    }
+    EXPECT_EQ(first_candidate_with_e(buf, e[3]), 3u);
+    EXPECT_EQ(first_candidate_with_e(buf, -1.0f), buf.count - 1);
+  });
+}
+
 TEST(CandidateEvalTest, FastExpIsAccurateOverItsRange) {
   test::for_each_simd_target([&] {
     // The loops evaluate exp at -e_j / 2 > -4.5 (truncation at 3 sigma) and at differences of such
