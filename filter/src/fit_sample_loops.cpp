@@ -23,6 +23,15 @@ namespace scanclean::detail {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
+// Stores one vector of samples (offsets and weights) at `at` in q's arrays.
+template <class DF, class VF = hn::Vec<DF>>
+HWY_INLINE void StoreSamples(DF d, FitSampleSet& q, std::size_t at, VF x, VF y, VF z, VF t) {
+  hn::StoreU(x, d, q.x.data() + at);
+  hn::StoreU(y, d, q.y.data() + at);
+  hn::StoreU(z, d, q.z.data() + at);
+  hn::StoreU(t, d, q.t.data() + at);
+}
+
 // A block of N points at a time: their coordinates gathered (a point is 3 doubles, so point j's
 // x is double 3 j), offset from the centre, tested and weighted; a block with every point within
 // h is stored with vector stores, the others point by point. The last m mod N points, by the
@@ -60,10 +69,7 @@ std::size_t MakeSamples(const Eigen::Vector3d* p, const std::uint32_t* js, std::
     const auto fx = hn::DemoteTo(df, dx), fy = hn::DemoteTo(df, dy);
     const auto fz = hn::DemoteTo(df, dz), ft = hn::DemoteTo(df, t);
     if (hn::AllTrue(d, in)) {
-      hn::StoreU(fx, df, ox + n);
-      hn::StoreU(fy, df, oy + n);
-      hn::StoreU(fz, df, oz + n);
-      hn::StoreU(ft, df, ot + n);
+      StoreSamples(df, *out, n, fx, fy, fz, ft);
       n += N;
       continue;
     }
@@ -108,13 +114,7 @@ HWY_INLINE void TrimBlocks(D d, FitSampleSet& q, const TrimPlane& plane, std::si
     const auto out = hn::Gt(hn::Mul(r, r), lim);
     const std::size_t valid = std::min(N, n - k);
     if (valid == N && hn::AllFalse(d, out)) {
-      if (kept != k) {
-        const auto t = hn::LoadU(d, pt + k);
-        hn::StoreU(x, d, px + kept);
-        hn::StoreU(y, d, py + kept);
-        hn::StoreU(z, d, pz + kept);
-        hn::StoreU(t, d, pt + kept);
-      }
+      if (kept != k) StoreSamples(d, q, kept, x, y, z, hn::LoadU(d, pt + k));
       kept += N;
       continue;
     }
