@@ -95,17 +95,13 @@ std::size_t MakeSamples(const Eigen::Vector3d* p, const std::uint32_t* js, std::
 // trimmed is kept whole (moved down with vector stores once something before it was trimmed),
 // the others sample by sample. Lanes past n (the padding) are neither trimmed nor kept.
 template <class D>
-HWY_INLINE void TrimBlocks(D d, FitSampleSet& q, const TrimPlane& plane, std::size_t end,
+HWY_INLINE void TrimBlocks(D d, FitSampleSet& q, const TrimPlaneF& p, std::size_t end,
                            std::size_t& k, std::size_t& kept, FitSums& fs) {
   const std::size_t N = hn::Lanes(d), n = q.n;
   float *px = q.x.data(), *py = q.y.data(), *pz = q.z.data(), *pt = q.t.data();
-  const auto nx = hn::Set(d, static_cast<float>(plane.n[0]));
-  const auto ny = hn::Set(d, static_cast<float>(plane.n[1]));
-  const auto nz = hn::Set(d, static_cast<float>(plane.n[2]));
-  const auto mx = hn::Set(d, static_cast<float>(plane.m[0]));
-  const auto my = hn::Set(d, static_cast<float>(plane.m[1]));
-  const auto mz = hn::Set(d, static_cast<float>(plane.m[2]));
-  const auto lim = hn::Set(d, static_cast<float>(plane.limit2));
+  const auto nx = hn::Set(d, p.nx), ny = hn::Set(d, p.ny), nz = hn::Set(d, p.nz);
+  const auto mx = hn::Set(d, p.mx), my = hn::Set(d, p.my), mz = hn::Set(d, p.mz);
+  const auto lim = hn::Set(d, p.limit2);
   std::uint8_t bits[(hn::MaxLanes(d) + 7) / 8];
   for (; k < end; k += N) {
     const auto x = hn::LoadU(d, px + k), y = hn::LoadU(d, py + k), z = hn::LoadU(d, pz + k);
@@ -140,9 +136,10 @@ std::size_t TrimSamples(FitSampleSet* q, const TrimPlane* plane, FitSums* fs) {
   const hn::ScalableTag<float> d;
   const hn::CappedTag<float, kFitLanes> d8;
   const std::size_t n = q->n, N = hn::Lanes(d);
+  const TrimPlaneF p(*plane);
   std::size_t k = 0, kept = 0;
-  TrimBlocks(d, *q, *plane, n / N * N, k, kept, *fs);
-  TrimBlocks(d8, *q, *plane, n, k, kept, *fs);
+  TrimBlocks(d, *q, p, n / N * N, k, kept, *fs);
+  TrimBlocks(d8, *q, p, n, k, kept, *fs);
   q->n = kept;
   q->pad();
   return kept;

@@ -77,22 +77,6 @@ typedef float V4fu __attribute__((vector_size(16), aligned(4)));
   return s;
 }
 
-struct TrimPlaneF {
-  float nx, ny, nz, mx, my, mz, limit2;
-  explicit TrimPlaneF(const TrimPlane& p)
-      : nx(static_cast<float>(p.n[0])),
-        ny(static_cast<float>(p.n[1])),
-        nz(static_cast<float>(p.n[2])),
-        mx(static_cast<float>(p.m[0])),
-        my(static_cast<float>(p.m[1])),
-        mz(static_cast<float>(p.m[2])),
-        limit2(static_cast<float>(p.limit2)) {}
-  bool trims(float x, float y, float z) const {
-    const float r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
-    return r * r > limit2;
-  }
-};
-
 // AVX2 without FMA: products and sums stay separately rounded, as in the scalar loops.
 SCANCLEAN_AVX2 FitSums sums_avx2(const FitSampleSet& q) {
   return sums_impl(q);
@@ -130,7 +114,7 @@ bool have_avx2() {
 #if defined(__x86_64__)
   static const bool yes = __builtin_cpu_supports("avx2");
 #else
-  static const bool yes = false;  // the baseline loops (trim_samples_scalar for the trimming)
+  static const bool yes = false;  // the baseline loops
 #endif
   return yes;
 }

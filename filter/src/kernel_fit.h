@@ -101,6 +101,22 @@ struct TrimPlane {
   double n[3], m[3];
   double limit2;
 };
+//! The plane of a trimming pass rounded to float, as the pass uses it (every instruction set).
+struct TrimPlaneF {
+  float nx, ny, nz, mx, my, mz, limit2;
+  explicit TrimPlaneF(const TrimPlane& p)
+      : nx(static_cast<float>(p.n[0])),
+        ny(static_cast<float>(p.n[1])),
+        nz(static_cast<float>(p.n[2])),
+        mx(static_cast<float>(p.m[0])),
+        my(static_cast<float>(p.m[1])),
+        mz(static_cast<float>(p.m[2])),
+        limit2(static_cast<float>(p.limit2)) {}
+  bool trims(float x, float y, float z) const {
+    const float r = nx * (x - mx) + ny * (y - my) + nz * (z - mz);
+    return r * r > limit2;
+  }
+};
 //! Keeps the samples whose residual r = (n_x (x - m_x) + n_y (y - m_y)) + n_z (z - m_z) has
 //! !(r r > limit2), all in float (the plane rounded to float), moved down in order; takes the
 //! others' terms (fit_sums' products, in double) out of `sums`, in sample order. Returns the
@@ -114,7 +130,7 @@ std::size_t trim_samples_scalar(FitSampleSet& samples, const TrimPlane& plane, F
 //! Appends to out the samples of the points p[js[k]], k < m, within h of `centre` (r2 < h2), in
 //! order: offset p[j] - centre and r2 = (dx dx + dy dy) + dz dz in double, chi weight
 //! t = 1 - r2 inv_h2 squared twice, each rounded to float. out needs room for m more. A vector
-//! of points at a time (8 with AVX-512, 4 with AVX2; make_samples.cpp), with the scalar loop's
+//! of points at a time (8 with AVX-512, 4 with AVX2; fit_sample_loops.cpp), with the scalar loop's
 //! operations (no fused multiply-add): its results bit for bit on every processor. Returns the
 //! count appended (out is not padded).
 std::size_t make_samples(const Eigen::Vector3d* p, const std::uint32_t* js, std::size_t m,
