@@ -24,9 +24,13 @@ std::uint64_t new_cell_cache_key() {
 
 CellSelect::Entry* CellSelect::entry(const NeighborIndex& index, std::uint64_t key,
                                      std::int64_t c) {
+  // An entry is made only where none matches: at most one does.
   Entry* found = nullptr;
   for (Entry& e : entry_)
-    if (e.cell == c && e.key == key) found = &e;
+    if (e.cell == c && e.key == key) {
+      found = &e;
+      break;
+    }
   if (found == nullptr) {
     // A neighbourhood too large to copy (data concentrated in few cells): the index's own
     // query, so that the cache stays within kEntries x kMaxPoints x 16 bytes per thread.
@@ -84,13 +88,24 @@ const CellSelect::Entry& CellSelect::part(const NeighborIndex& index, std::uint6
   const int octant = index.cell_octant(q, lo, hi);
   if (!((q.array() >= lo.array()).all() && (q.array() <= hi.array()).all())) return e;
   const bool sigma = !e.sigma.empty();
+  // A part is made (or made again in place) only where none matches: at most one does.
+  // Consecutive queries mostly fall into the same octant: the part of the last one first.
+  auto matches = [&](const Entry& p) { return p.cell == c && p.octant == octant && p.key == key; };
   Entry* found = nullptr;
-  for (Entry& p : parts_)
-    if (p.cell == c && p.octant == octant && p.key == key) found = &p;
+  if (matches(parts_[last_part_])) {
+    found = &parts_[last_part_];
+  } else {
+    for (std::size_t k = 0; k < kParts && !found; ++k)
+      if (matches(parts_[k])) {
+        found = &parts_[k];
+        last_part_ = k;
+      }
+  }
   if (found && found->reach >= r && found->has_sigma == sigma) return *found;
   if (!found) {
     found = &parts_[next_part_];
     next_part_ = (next_part_ + 1) % kParts;
+    last_part_ = static_cast<std::size_t>(found - parts_);
   }
   Entry& p = *found;
   p.key = key;

@@ -111,6 +111,7 @@ class CellSelect {
   static constexpr std::size_t kParts = 4 * kEntries;
   Entry parts_[kParts];
   std::size_t next_part_ = 0;
+  std::size_t last_part_ = 0;  // the part the last query took
   std::vector<std::uint32_t> hit_;
 };
 
