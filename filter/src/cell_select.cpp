@@ -52,16 +52,15 @@ CellSelect::Entry* CellSelect::entry(const NeighborIndex& index, std::uint64_t k
       e.slot.resize(e.n);
     }
     e.sigma.clear();
+    // The index's points lie one after the other in slot order (x, y, z each).
+    static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
     std::size_t k = 0;
     index.for_each_adjacent_run(static_cast<std::size_t>(c),
                                 [&](std::uint32_t b, std::uint32_t end) {
-                                  for (std::uint32_t s = b; s < end; ++s, ++k) {
-                                    const Eigen::Vector3f& p = index.slot_point(s);
-                                    e.x[k] = p.x();
-                                    e.y[k] = p.y();
-                                    e.z[k] = p.z();
-                                    e.slot[k] = s;
-                                  }
+                                  if (end <= b) return;
+                                  split_run(index.slot_point(b).data(), end - b, b, e.x.data() + k,
+                                            e.y.data() + k, e.z.data() + k, e.slot.data() + k);
+                                  k += end - b;
                                 });
     const float inf = std::numeric_limits<float>::infinity();
     for (; k < e.n; ++k) {

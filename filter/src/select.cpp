@@ -307,6 +307,37 @@ std::size_t Reach8(const float* x, const float* y, const float* z, const float* 
   return select_padded<true>(x, y, z, sigma, slots, n, origin, r2, scale, margin, out);
 }
 
+// split_run: whole vectors of dv from k on, while they fit; returns where it stopped.
+template <class DV>
+HWY_INLINE std::size_t split_from(DV d, const float* xyz, std::size_t k, std::size_t n,
+                                  std::uint32_t first, float* x, float* y, float* z,
+                                  std::uint32_t* slot) {
+  const hn::RebindToUnsigned<DV> du;
+  const std::size_t N = hn::Lanes(d);
+  for (; k + N <= n; k += N) {
+    hn::Vec<DV> px, py, pz;
+    hn::LoadInterleaved3(d, xyz + 3 * k, px, py, pz);
+    hn::StoreU(px, d, x + k);
+    hn::StoreU(py, d, y + k);
+    hn::StoreU(pz, d, z + k);
+    hn::StoreU(hn::Iota(du, first + static_cast<std::uint32_t>(k)), du, slot + k);
+  }
+  return k;
+}
+
+// Whole vectors of DL, then of D (where DL is wider), then one point at a time.
+void SplitRun(const float* xyz, std::size_t n, std::uint32_t first, float* x, float* y, float* z,
+              std::uint32_t* slot) {
+  std::size_t k = split_from(DL(), xyz, 0, n, first, x, y, z, slot);
+  k = split_from(D(), xyz, k, n, first, x, y, z, slot);
+  for (; k < n; ++k) {
+    x[k] = xyz[3 * k];
+    y[k] = xyz[3 * k + 1];
+    z[k] = xyz[3 * k + 2];
+    slot[k] = first + static_cast<std::uint32_t>(k);
+  }
+}
+
 const char* Target() {
   return hwy::TargetName(HWY_TARGET);
 }
@@ -332,6 +363,7 @@ HWY_EXPORT(KeepBin);
 HWY_EXPORT(Within8);
 HWY_EXPORT(Reach8);
 HWY_EXPORT(Loops);
+HWY_EXPORT(SplitRun);
 
 SelectLoops select_loops() {
   return HWY_DYNAMIC_DISPATCH(Loops)();
@@ -421,6 +453,11 @@ std::size_t select_within_reach(const float* x, const float* y, const float* z, 
                                 const std::uint32_t* slots, std::size_t n, const float origin[3],
                                 float r2, float scale, float margin, std::uint32_t* out) {
   return HWY_DYNAMIC_DISPATCH(Reach8)(x, y, z, sigma, slots, n, origin, r2, scale, margin, out);
+}
+
+void split_run(const float* xyz, std::size_t n, std::uint32_t first, float* x, float* y, float* z,
+               std::uint32_t* slot) {
+  HWY_DYNAMIC_DISPATCH(SplitRun)(xyz, n, first, x, y, z, slot);
 }
 
 }  // namespace scanclean::detail

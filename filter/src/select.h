@@ -130,5 +130,9 @@ std::size_t select_within(const float* x, const float* y, const float* z,
 std::size_t select_within_reach(const float* x, const float* y, const float* z, const float* sigma,
                                 const std::uint32_t* slots, std::size_t n, const float origin[3],
                                 float r2, float scale, float margin, std::uint32_t* out);
+//! Copies the n points of xyz (x, y, z of each point in turn) into x, y and z, and the slots
+//! first, first + 1, ... into slot: a run of an index's points as a struct of arrays.
+void split_run(const float* xyz, std::size_t n, std::uint32_t first, float* x, float* y, float* z,
+               std::uint32_t* slot);
 
 }  // namespace scanclean::detail

@@ -396,6 +396,35 @@ TEST(SelectTest, LoopsTakenOnceGiveTheFreeFunctionsResults) {
   });
 }
 
+TEST(SelectTest, SplitRunCopiesEachPointAndItsSlotAndNothingPast) {
+  // Runs of every length around the vectors' widths (16 on AVX-512, 8, 4): whole vectors, the
+  // narrower ones, then single points. Oracle: the interleaved input itself; a sentinel past
+  // the run's end must stay.
+  test::for_each_simd_target([&] {
+    std::mt19937 rng(31);  // seed 31
+    std::uniform_real_distribution<float> u(-2.0f, 2.0f);
+    for (const std::size_t n : {0, 1, 3, 4, 7, 8, 9, 15, 16, 17, 23, 24, 25, 31, 32, 33, 47, 100}) {
+      std::vector<float> xyz(3 * n);
+      for (float& v : xyz) v = u(rng);
+      const float sentinel = -99.0f;
+      const std::uint32_t first = 4000000000u - 40u;  // the slots near the top of the range
+      std::vector<float> x(n + 1, sentinel), y(n + 1, sentinel), z(n + 1, sentinel);
+      std::vector<std::uint32_t> slot(n + 1, 7);
+      split_run(xyz.data(), n, first, x.data(), y.data(), z.data(), slot.data());
+      for (std::size_t k = 0; k < n; ++k) {
+        ASSERT_EQ(x[k], xyz[3 * k]) << n << " " << k;
+        ASSERT_EQ(y[k], xyz[3 * k + 1]) << n << " " << k;
+        ASSERT_EQ(z[k], xyz[3 * k + 2]) << n << " " << k;
+        ASSERT_EQ(slot[k], first + k) << n << " " << k;
+      }
+      EXPECT_EQ(x[n], sentinel);
+      EXPECT_EQ(y[n], sentinel);
+      EXPECT_EQ(z[n], sentinel);
+      EXPECT_EQ(slot[n], 7u);
+    }
+  });
+}
+
 TEST(SelectTest, LargestFloatBoundDecidesTheDoubleTestExactly) {
   // For every float v near the bound, ratio x v <= l in double holds exactly when v <= bound.
   std::mt19937 rng(29);  // seed 29
