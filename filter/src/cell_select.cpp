@@ -90,22 +90,16 @@ const CellSelect::Entry& CellSelect::part(const NeighborIndex& index, std::uint6
   // A part is made (or made again in place) only where none matches: at most one does.
   // Consecutive queries mostly fall into the same octant: the part of the last one first.
   auto matches = [&](const Entry& p) { return p.cell == c && p.octant == octant && p.key == key; };
-  Entry* found = nullptr;
-  if (matches(parts_[last_part_])) {
-    found = &parts_[last_part_];
-  } else {
-    for (std::size_t k = 0; k < kParts && !found; ++k)
-      if (matches(parts_[k])) {
-        found = &parts_[k];
-        last_part_ = k;
-      }
-  }
-  if (found && found->reach >= r && found->has_sigma == sigma) return *found;
+  Entry* found = matches(parts_[last_part_]) ? &parts_[last_part_] : nullptr;
+  for (std::size_t k = 0; k < kParts && !found; ++k)
+    if (matches(parts_[k])) found = &parts_[k];
+  const bool usable = found && found->reach >= r && found->has_sigma == sigma;
   if (!found) {
     found = &parts_[next_part_];
     next_part_ = (next_part_ + 1) % kParts;
-    last_part_ = static_cast<std::size_t>(found - parts_);
   }
+  last_part_ = static_cast<std::size_t>(found - parts_);
+  if (usable) return *found;
   Entry& p = *found;
   p.key = key;
   p.cell = c;
