@@ -11,8 +11,10 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <type_traits>
 #include <vector>
 
+#include "radix_sort.h"
 #include "scanclean/filter/filter_options.h"
 
 namespace scanclean::detail {
@@ -63,13 +65,20 @@ inline void report(const FilterOptions& o, const std::string& phase, double frac
   if (o.progress) o.progress(phase, fraction);
 }
 
-//! The element at rank (n - 1) / 2 (the lower median); T{} for an empty vector.
+//! The element at rank (n - 1) / 2 (the lower median); T{} for an empty vector. v is not
+//! changed; float and double arrays are selected in parallel (radix_select).
 template <class T>
-T median_of(std::vector<T> v) {
+T median_of(const std::vector<T>& v) {
   if (v.empty()) return T{};
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>((v.size() - 1) / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
+  const std::size_t mid = (v.size() - 1) / 2;
+  if constexpr (std::is_same_v<T, float> || std::is_same_v<T, double>) {
+    return radix_select(v, mid);
+  } else {
+    std::vector<T> c = v;
+    const auto at = c.begin() + static_cast<std::ptrdiff_t>(mid);
+    std::nth_element(c.begin(), at, c.end());
+    return *at;
+  }
 }
 
 }  // namespace scanclean::detail

@@ -11,6 +11,7 @@
 #include "kernel_fit.h"
 #include "noise_scale.h"
 #include "parallel.h"
+#include "radix_sort.h"
 #include "scale_selection.h"
 #include "scanclean/core/errors.h"
 #include "select.h"
@@ -294,13 +295,10 @@ ScaleChoice choose_scale(PointSet& in, const std::vector<Eigen::Vector3f>& pf, d
     const auto mm = std::minmax_element(in.hi.begin(), in.hi.end());
     sr.h_min = *mm.first;
     sr.h_max = *mm.second;
-    std::vector<float> q = in.hi;
-    const auto at = q.begin() + static_cast<std::ptrdiff_t>((q.size() - 1) * 99 / 100);
-    std::nth_element(q.begin(), at, q.end());
-    sr.h_grid = std::clamp(static_cast<double>(*at), h, 1.7 * h);
-    const auto at_k = q.begin() + static_cast<std::ptrdiff_t>((q.size() - 1) * 999 / 1000);
-    std::nth_element(at, at_k, q.end());  // above the 99th percentile: the same set
-    sr.h_grid_kernels = std::clamp(static_cast<double>(*at_k), sr.h_grid, 1.7 * h);
+    const std::size_t last = in.hi.size() - 1;
+    sr.h_grid = std::clamp(static_cast<double>(radix_select(in.hi, last * 99 / 100)), h, 1.7 * h);
+    sr.h_grid_kernels =
+        std::clamp(static_cast<double>(radix_select(in.hi, last * 999 / 1000)), sr.h_grid, 1.7 * h);
   }
   // The grid the later phases use: one that serves h_grid, else they build their own of
   // grid_cell_for(h_grid). The scale test's grid serves only when it is that very grid (h_grid is
