@@ -20,9 +20,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   const std::size_t n = x.size();
   Clusters cl;
   cl.rep_of.assign(n, kNone);
-  std::vector<std::uint32_t> cand;
-  for (std::size_t i = 0; i < n; ++i)
-    if (projected(pr.state[i])) cand.push_back(static_cast<std::uint32_t>(i));
+  std::vector<std::uint32_t> cand =
+      indices_where(n, [&](std::size_t i) { return projected(pr.state[i]); });
   if (!(eps > 0)) {
     for (std::uint32_t i : cand) {
       cl.rep_of[i] = static_cast<std::uint32_t>(cl.seed.size());
@@ -40,7 +39,7 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     });
     stable_radix_sort(
         key, [](const auto& e) { return std::uint64_t{e.first}; }, scratch);
-    for (std::size_t k = 0; k < cand.size(); ++k) cand[k] = key[k].second;
+    parallel_each(cand.size(), [&](std::size_t k) { cand[k] = key[k].second; });
   }
   // The candidates' bounding box, in parallel (their positions are read in rank order, scattered).
   using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
@@ -94,9 +93,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   // grid order, so the positions are read in sequence).
   std::vector<std::uint32_t> rank_of(n, kNone);
   parallel_each(nc, [&](std::size_t k) { rank_of[cand[k]] = static_cast<std::uint32_t>(k); });
-  std::vector<std::uint32_t> joiners;  // point indices, in point order
-  for (std::size_t i = 0; i < n; ++i)
-    if (rank_of[i] != kNone && joins[rank_of[i]]) joiners.push_back(static_cast<std::uint32_t>(i));
+  std::vector<std::uint32_t> joiners = indices_where(  // point indices, in point order
+      n, [&](std::size_t i) { return rank_of[i] != kNone && joins[rank_of[i]] != 0; });
   const std::size_t nj = joiners.size();
   // Every cell coordinate lies in [0, top] (coord is monotone; lo is a cell below the box).
   std::int32_t top[3] = {0, 0, 0};
@@ -223,14 +221,11 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   // Rounds: a candidate with an earlier representative among its neighbours is a member; one
   // whose earlier neighbours are all members is a representative.
   enum : std::uint8_t { kUndecided, kRep, kMember };
-  std::vector<std::uint8_t> role(nc, kUndecided), next_role;
-  std::vector<std::uint32_t> open;
-  for (std::size_t k = 0; k < nc; ++k) {
-    if (!joins[k] || row[k] == row[k + 1])
-      role[k] = kRep;
-    else
-      open.push_back(static_cast<std::uint32_t>(k));
-  }
+  std::vector<std::uint8_t> role(nc), next_role;
+  parallel_each(
+      nc, [&](std::size_t k) { role[k] = !joins[k] || row[k] == row[k + 1] ? kRep : kUndecided; });
+  std::vector<std::uint32_t> open =
+      indices_where(nc, [&](std::size_t k) { return role[k] == kUndecided; });
   auto decide = [&](std::uint32_t k, const std::vector<std::uint8_t>& from) {
     bool all_members = true;
     for (std::uint32_t m = row[k]; m < row[k + 1]; ++m) {
@@ -253,13 +248,15 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   // decided by then).
   for (std::uint32_t k : open) role[k] = decide(k, role);
   // Representatives in rank order; members join the nearest earlier one (ties: the earlier).
+  const std::vector<std::uint32_t> reps =
+      indices_where(nc, [&](std::size_t k) { return role[k] == kRep; });
+  const std::size_t R = reps.size();
   std::vector<std::uint32_t> rep_index(nc, kNone);
-  for (std::size_t k = 0; k < nc; ++k)
-    if (role[k] == kRep) {
-      rep_index[k] = static_cast<std::uint32_t>(cl.seed.size());
-      cl.seed.push_back(cand[k]);
-    }
-  const std::size_t R = cl.seed.size();
+  cl.seed.resize(R);
+  parallel_each(R, [&](std::size_t r) {
+    rep_index[reps[r]] = static_cast<std::uint32_t>(r);
+    cl.seed[r] = cand[reps[r]];
+  });
   std::vector<std::uint32_t> joined(nc, kNone);  // per candidate: its representative
   parallel_each(nc, [&](std::size_t k) {
     if (role[k] == kRep) {
@@ -280,14 +277,20 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     }
     joined[k] = best;
   });
-  // Members of each representative in rank order (a counting sort, stable in rank), then each
-  // representative's L-weighted sum in that order.
+  // Members of each representative in rank order, then each representative's L-weighted sum in
+  // that order. A representative comes first among its members (they join earlier ones); the
+  // others (few: most points stay alone) follow it in rank order.
+  const std::vector<std::uint32_t> joiners_k =
+      indices_where(nc, [&](std::size_t k) { return role[k] != kRep; });
   std::vector<std::uint32_t> first(R + 1, 0), members(nc);
-  for (std::size_t k = 0; k < nc; ++k) ++first[joined[k] + 1];
+  parallel_each(R, [&](std::size_t r) { first[r + 1] = 1; });
+  for (const std::uint32_t k : joiners_k) ++first[joined[k] + 1];
   for (std::size_t r = 0; r < R; ++r) first[r + 1] += first[r];
+  parallel_each(R, [&](std::size_t r) { members[first[r]] = reps[r]; });
   {
-    std::vector<std::uint32_t> fill(first.begin(), first.end() - 1);
-    for (std::size_t k = 0; k < nc; ++k) members[fill[joined[k]]++] = static_cast<std::uint32_t>(k);
+    std::vector<std::uint32_t> fill(R);
+    parallel_each(R, [&](std::size_t r) { fill[r] = first[r] + 1; });
+    for (const std::uint32_t k : joiners_k) members[fill[joined[k]]++] = k;
   }
   cl.count.resize(R);
   cl.position.resize(R);

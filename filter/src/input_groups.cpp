@@ -78,24 +78,36 @@ Coincident find_coincident(const PointCloud& input) {
     stable_radix_sort(key, top, scratch);
   }
   // Within a run (in index order), each point that equals an earlier head joins the earliest
-  // such head; the others are heads.
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> copies;  // (point, its head)
-  std::vector<std::uint8_t> is_head;
-  for (std::size_t b = 0; b < n;) {
-    std::size_t e = b + 1;
-    while (e < n && top(key[e]) == top(key[b])) ++e;
-    if (e - b > 1) {
-      is_head.assign(e - b, 1);
-      for (std::size_t k = b + 1; k < e; ++k)
-        for (std::size_t q = b; q < k; ++q)
-          if (is_head[q - b] && same(id(key[q]), id(key[k]))) {
-            copies.emplace_back(id(key[k]), id(key[q]));
-            is_head[k - b] = 0;
-            break;
-          }
+  // such head; the others are heads. The runs are scanned in parallel chunks (a run belongs to
+  // the chunk it starts in), their copies listed per chunk, then in chunk order: the list the
+  // scan in one pass gives.
+  using Copy = std::pair<std::uint32_t, std::uint32_t>;  // (point, its head)
+  constexpr std::size_t kChunk = std::size_t{1} << 16;
+  const std::size_t chunks = std::clamp<std::size_t>(n / kChunk, 1, 64);
+  std::vector<std::vector<Copy>> found(chunks);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    const std::size_t end = n * (c + 1) / chunks;
+    std::size_t b = n * c / chunks;
+    while (b > 0 && b < end && top(key[b]) == top(key[b - 1])) ++b;  // the first run start
+    std::vector<std::uint8_t> is_head;
+    while (b < end) {
+      std::size_t e = b + 1;
+      while (e < n && top(key[e]) == top(key[b])) ++e;
+      if (e - b > 1) {
+        is_head.assign(e - b, 1);
+        for (std::size_t k = b + 1; k < e; ++k)
+          for (std::size_t q = b; q < k; ++q)
+            if (is_head[q - b] && same(id(key[q]), id(key[k]))) {
+              found[c].emplace_back(id(key[k]), id(key[q]));
+              is_head[k - b] = 0;
+              break;
+            }
+      }
+      b = e;
     }
-    b = e;
-  }
+  });
+  std::vector<Copy> copies;
+  for (const auto& f : found) copies.insert(copies.end(), f.begin(), f.end());
   Coincident c;
   if (copies.empty()) return c;  // the common case: no copies (and no memory held for them)
   std::vector<std::uint32_t> head(n);
@@ -148,6 +160,11 @@ FarSplit split_far_points(const PointCloud& input) {
                       for (std::size_t i = r.begin(); i < r.end(); ++i) c += inside(i) ? 0 : 1;
                       far_count.fetch_add(c, std::memory_order_relaxed);
                     });
+  if (far_count.load() == 0) {  // the common case: every point near
+    split.near.resize(n);
+    parallel_each(n, [&](std::size_t i) { split.near[i] = i; });
+    return split;
+  }
   split.far.reserve(far_count.load());
   split.near.reserve(n - far_count.load());
   for (std::size_t i = 0; i < n; ++i) (inside(i) ? split.near : split.far).push_back(i);

@@ -1,6 +1,7 @@
 #include "neighbor_index.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
@@ -94,11 +95,19 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
     inv_ = ids_;
     return;
   }
-  Eigen::Vector3f lo = points[0], hi = points[0];
-  for (const auto& p : points) {
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
+  using Box = std::pair<Eigen::Vector3f, Eigen::Vector3f>;
+  const auto [lo, hi] = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, n, 4096), Box{points[0], points[0]},
+      [&](const tbb::blocked_range<std::size_t>& r, Box b) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) {
+          b.first = b.first.cwiseMin(points[i]);
+          b.second = b.second.cwiseMax(points[i]);
+        }
+        return b;
+      },
+      [](const Box& a, const Box& b) {
+        return Box{a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)};
+      });
   const double max_extent = (hi - lo).cast<double>().maxCoeff();
   constexpr double kMaxCells = (1 << 21) - 2;
   if (max_extent / cell > kMaxCells) cell = max_extent / kMaxCells * (1 + 1e-6);
@@ -145,14 +154,13 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
                       }
                     });
   if (owned) std::vector<Eigen::Vector3f>().swap(*owned);
-  std::vector<std::uint64_t> keys;
-  for (std::size_t s = 0; s < n; ++s) {
-    if (s == 0 || entries[s].morton != entries[s - 1].morton) {
-      cell_begin_.push_back(static_cast<std::uint32_t>(s));
-      const auto& p = pts_[s];
-      keys.push_back(detail::cell_key(coords(p, 0), coords(p, 1), coords(p, 2)));
-    }
-  }
+  cell_begin_ = detail::indices_where(
+      n, [&](std::size_t s) { return s == 0 || entries[s].morton != entries[s - 1].morton; });
+  std::vector<std::uint64_t> keys(cell_begin_.size());
+  detail::parallel_each(keys.size(), [&](std::size_t c) {
+    const auto& p = pts_[cell_begin_[c]];
+    keys[c] = detail::cell_key(coords(p, 0), coords(p, 1), coords(p, 2));
+  });
   detail::FillLaterVector<Entry>().swap(entries);
   cell_begin_.push_back(static_cast<std::uint32_t>(n));
   std::size_t cap = 16;

@@ -374,14 +374,14 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
         });
       }
       const double threshold = o.tau > 0 ? o.tau * median_of(rho) : 0.0;
-      for (std::size_t s = 0; s < R; ++s) {
+      parallel_each(R, [&](std::size_t s) {
         if (rho[s] < threshold)
           drop[s] = Removal::kLowDensity;
         else if (by_l && low_l[s])
           drop[s] = Removal::kLowLikelihood;
         else if (by_d && displaced[s])
           drop[s] = Removal::kDisplaced;
-      }
+      });
     }
     if (o.remove_small_components) {
       std::vector<std::uint32_t> parent(R);
@@ -410,7 +410,7 @@ std::vector<Removal> test_representatives(const RepresentativeTestInput& in,
             size[find_root(parent, static_cast<std::uint32_t>(s))] < min_size)
           drop[s] = Removal::kSmallComponent;
     }
-    for (std::size_t s = 0; s < R; ++s) rep_drop[rord[s]] = drop[s];
+    parallel_each(R, [&](std::size_t s) { rep_drop[rord[s]] = drop[s]; });
   }
 
   return rep_drop;

@@ -1,5 +1,6 @@
 #include "outputs.h"
 
+#include <tbb/combinable.h>
 #include <tbb/parallel_invoke.h>
 
 #include <array>
@@ -41,9 +42,8 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     parallel_each(R, [&](std::size_t r) {
       if (rep_drop[r] == Removal::kKept) rep_at[src[cl.seed[r]]] = static_cast<std::uint32_t>(r);
     });
-    kept.reserve(R);
-    for (std::uint32_t r : rep_at)
-      if (r != kNone) kept.push_back(r);
+    kept = indices_where(N, [&](std::size_t i) { return rep_at[i] != kNone; });
+    parallel_each(kept.size(), [&](std::size_t k) { kept[k] = rep_at[kept[k]]; });
   }
   {
     std::vector<std::uint32_t> seeds_s(kept.size());  // in the filter's order
@@ -115,48 +115,64 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     for (std::uint32_t r : kept) st.merged += members(r) - 1;
   }
   {
+    // Each point's flag (src maps the filter's points to distinct input points) and why it was
+    // removed, counted per thread and added up: integer counts, the same in any order.
+    struct Removed {
+      std::size_t unsupported = 0, off_surface = 0, low_density = 0, small_components = 0,
+                  low_likelihood = 0, displaced = 0;
+    };
     std::vector<std::uint8_t> in_flag(N, 0);
-    for (std::size_t s = 0; s < N; ++s) {
+    tbb::combinable<Removed> removed;
+    parallel_each(N, [&](std::size_t s) {
+      Removed& c = removed.local();
       switch (pr.state[s]) {
         case ProjectionState::kUnsupported:
           in_flag[src[s]] = kFlagUnsupported;
-          st.unsupported += mult(s);
-          continue;
+          c.unsupported += mult(s);
+          return;
         case ProjectionState::kOffSurface:
           in_flag[src[s]] = kFlagOutlier;
-          st.off_surface += mult(s);
-          continue;
+          c.off_surface += mult(s);
+          return;
         case ProjectionState::kSparse:
           in_flag[src[s]] = kFlagOutlier;
-          st.low_density += mult(s);
-          continue;
+          c.low_density += mult(s);
+          return;
         case ProjectionState::kConverged:
         case ProjectionState::kNotConverged:
           break;
       }
       const Removal why = rep_drop[cl.rep_of[s]];
-      if (why == Removal::kKept) continue;
+      if (why == Removal::kKept) return;
       in_flag[src[s]] = static_cast<std::uint8_t>(
           kFlagOutlier | (pr.state[s] == ProjectionState::kNotConverged ? kFlagNotConverged : 0));
       switch (why) {
         case Removal::kSmallComponent:
-          st.small_components += mult(s);
+          c.small_components += mult(s);
           break;
         case Removal::kLowLikelihood:
-          st.low_likelihood += mult(s);
+          c.low_likelihood += mult(s);
           break;
         case Removal::kDisplaced:
-          st.displaced += mult(s);
+          c.displaced += mult(s);
           break;
         case Removal::kLowDensity:
         case Removal::kKept:
-          st.low_density += mult(s);
+          c.low_density += mult(s);
           break;
       }
-    }
-    std::vector<std::size_t> idx;
-    for (std::size_t i = 0; i < N; ++i)
-      if (in_flag[i]) idx.push_back(i);
+    });
+    removed.combine_each([&](const Removed& c) {
+      st.unsupported += c.unsupported;
+      st.off_surface += c.off_surface;
+      st.low_density += c.low_density;
+      st.small_components += c.small_components;
+      st.low_likelihood += c.low_likelihood;
+      st.displaced += c.displaced;
+    });
+    const std::vector<std::uint32_t> flagged =
+        indices_where(N, [&](std::size_t i) { return in_flag[i] != 0; });
+    std::vector<std::size_t> idx(flagged.begin(), flagged.end());
     PointCloud& ol = result.outliers;
     ol = select(input, idx);
     ol.grid = OrganizedGrid{};

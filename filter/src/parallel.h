@@ -5,7 +5,9 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
 #include <cstddef>
@@ -79,6 +81,66 @@ T median_of(const std::vector<T>& v) {
     std::nth_element(c.begin(), at, c.end());
     return *at;
   }
+}
+
+//! How many i in [0, n) have pred(i), counted in parallel.
+template <class Pred>
+std::size_t count_where(std::size_t n, Pred&& pred) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, n, 4096), std::size_t{0},
+      [&](const tbb::blocked_range<std::size_t>& r, std::size_t c) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) c += pred(i) ? 1 : 0;
+        return c;
+      },
+      [](std::size_t a, std::size_t b) { return a + b; });
+}
+
+//! The smallest i in [0, n) with pred(i), or n if none, searched in parallel.
+template <class Pred>
+std::size_t first_where(std::size_t n, Pred&& pred) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, n, 4096), n,
+      [&](const tbb::blocked_range<std::size_t>& r, std::size_t first) {
+        for (std::size_t i = r.begin(); i < r.end() && i < first; ++i)
+          if (pred(i)) return i;
+        return first;
+      },
+      [](std::size_t a, std::size_t b) { return std::min(a, b); });
+}
+
+//! The bounding box of the points, in parallel (min and max: the same box in any order).
+inline Eigen::AlignedBox3d bounding_box_of(const std::vector<Eigen::Vector3d>& p) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, p.size(), 4096), Eigen::AlignedBox3d(),
+      [&](const tbb::blocked_range<std::size_t>& r, Eigen::AlignedBox3d box) {
+        for (std::size_t i = r.begin(); i < r.end(); ++i) box.extend(p[i]);
+        return box;
+      },
+      [](const Eigen::AlignedBox3d& a, const Eigen::AlignedBox3d& b) { return a.merged(b); });
+}
+
+//! The i in [0, n) with pred(i), in increasing order, found in parallel: counted chunk by chunk,
+//! then written from each chunk's offset (pred is called twice per i). The same list for any
+//! thread count.
+template <class Pred>
+std::vector<std::uint32_t> indices_where(std::size_t n, Pred&& pred) {
+  constexpr std::size_t kChunk = std::size_t{1} << 15;
+  const std::size_t chunks = std::clamp<std::size_t>(n / kChunk, 1, 256);
+  auto chunk_begin = [&](std::size_t c) { return n * c / chunks; };
+  std::vector<std::size_t> at(chunks + 1, 0);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    std::size_t m = 0;
+    for (std::size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) m += pred(i) ? 1 : 0;
+    at[c + 1] = m;
+  });
+  for (std::size_t c = 0; c < chunks; ++c) at[c + 1] += at[c];
+  std::vector<std::uint32_t> out(at[chunks]);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+    std::size_t m = at[c];
+    for (std::size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i)
+      if (pred(i)) out[m++] = static_cast<std::uint32_t>(i);
+  });
+  return out;
 }
 
 }  // namespace scanclean::detail

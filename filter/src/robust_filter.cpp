@@ -52,21 +52,25 @@ std::size_t peak_rss_bytes() {
 void check_input(const PointCloud& input, const FilterOptions& o, bool& use_w, bool& use_v) {
   const std::size_t N = input.size();
   if (N >= 0xffffffffULL) throw InputError("filter: more than 4 billion points are not supported");
-  for (std::size_t i = 0; i < N; ++i)
-    if (!input.positions[i].allFinite())
-      throw InputError("filter input", "point " + std::to_string(i),
-                       "non-finite coordinate (remove invalid points before filtering)");
+  // The first offending point, found in parallel.
+  const std::size_t bad_position =
+      detail::first_where(N, [&](std::size_t i) { return !input.positions[i].allFinite(); });
+  if (bad_position < N)
+    throw InputError("filter input", "point " + std::to_string(bad_position),
+                     "non-finite coordinate (remove invalid points before filtering)");
   use_w = o.use_confidences && input.has_confidences();
   if (use_w) {
     if (input.confidences.size() != N)
       throw InputError("filter input", "confidences", "one confidence per point");
-    for (std::size_t i = 0; i < N; ++i)
-      if (!(input.confidences[i] >= 0.0f && input.confidences[i] <= 1.0f)) {
-        std::ostringstream v;
-        v << input.confidences[i];
-        throw InputError("filter input", "point " + std::to_string(i),
-                         "confidence " + v.str() + " outside [0, 1]");
-      }
+    const std::size_t i = detail::first_where(N, [&](std::size_t k) {
+      return !(input.confidences[k] >= 0.0f && input.confidences[k] <= 1.0f);
+    });
+    if (i < N) {
+      std::ostringstream v;
+      v << input.confidences[i];
+      throw InputError("filter input", "point " + std::to_string(i),
+                       "confidence " + v.str() + " outside [0, 1]");
+    }
   }
   use_v = o.use_sensor_normals && input.has_normals() && input.normals.size() == N;
 }
@@ -218,7 +222,7 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   // 1. Scale: h (or h_i), in a local frame around the bounding box's centre.
   auto t = Clock::now();
   detail::report(o, "scale", 0);
-  const Eigen::AlignedBox3d box = bounding_box(input);
+  const Eigen::AlignedBox3d box = detail::bounding_box_of(input.positions);
   const Eigen::Vector3d origin = box.center();
   std::vector<Eigen::Vector3f> pf(N);
   parallel_each(N, [&](std::size_t i) { pf[i] = (input.positions[i] - origin).cast<float>(); });
