@@ -1,6 +1,7 @@
 #include "neighbor_index.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
@@ -9,6 +10,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <nanoflann.hpp>
 #include <utility>
@@ -295,21 +297,48 @@ void NeighborIndex::knn(const Eigen::Vector3f& q, std::size_t k,
   std::sort(out.begin(), out.end());
 }
 
+void NeighborIndex::build_tree() const {
+  tree();
+}
+
 double rough_kth_distance(const std::vector<Eigen::Vector3f>& p, std::size_t kk,
                           std::size_t samples) {
   const std::size_t n = p.size(), m = std::min(n, samples);
   if (m == 0) return 0;
   const std::size_t step = std::clamp<std::size_t>(n / (8 * kk), 1, 16);
-  std::vector<Eigen::Vector3f> sub;
-  sub.reserve(n / step + 1);
-  for (std::size_t i = 0; i < n; i += step) sub.push_back(p[i]);
-  const NeighborIndex tree(std::move(sub), 0.0);  // k-d tree only
   const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
+  // A large subsample in two halves (alternate points), a k-d tree each, built side by side (a
+  // tree is built by one thread): the ks nearest of the subsample are among the ks nearest of
+  // each half, so the ks-th distance is the one a single tree gives.
+  const std::size_t parts = n / step >= 8192 ? 2 : 1;
+  std::vector<Eigen::Vector3f> half[2];
+  for (std::size_t t = 0; t < parts; ++t) half[t].reserve(n / (parts * step) + 1);
+  for (std::size_t i = 0, t = 0; i < n; i += step, t = (t + 1) % parts) half[t].push_back(p[i]);
+  std::unique_ptr<NeighborIndex> tree[2];
+  auto build = [&](std::size_t t) {
+    tree[t] = std::make_unique<NeighborIndex>(std::move(half[t]), 0.0);  // k-d tree only
+    tree[t]->build_tree();
+  };
+  if (parts == 2)
+    tbb::parallel_invoke([&] { build(0); }, [&] { build(1); });
+  else
+    build(0);
   std::vector<double> est(m, 0.0);
   detail::parallel_each(m, [&](std::size_t k) {
-    thread_local std::vector<std::pair<float, std::uint32_t>> nn;
-    tree.knn(p[k * n / m], ks, nn);
-    est[k] = nn.empty() ? 0.0 : std::sqrt(static_cast<double>(nn.back().first));
+    thread_local std::vector<std::pair<float, std::uint32_t>> nn[2];
+    for (std::size_t t = 0; t < parts; ++t) tree[t]->knn(p[k * n / m], ks, nn[t]);
+    if (parts == 1) nn[1].clear();
+    // The take-th smallest of the two sorted lists.
+    const std::size_t take = std::min(ks, nn[0].size() + nn[1].size());
+    if (take == 0) return;
+    std::size_t a = 0, b = 0;
+    float d2 = 0;
+    for (std::size_t c = 0; c < take; ++c) {
+      const bool from_a =
+          b == nn[1].size() || (a < nn[0].size() && nn[0][a].first <= nn[1][b].first);
+      d2 = from_a ? nn[0][a++].first : nn[1][b++].first;
+    }
+    est[k] = std::sqrt(static_cast<double>(d2));
   });
   return detail::median_of(est);
 }

@@ -93,6 +93,9 @@ class NeighborIndex {
   //! sorted by distance then index. Fewer if the set has fewer points. Thread-safe (const).
   void knn(const Eigen::Vector3f& q, std::size_t k,
            std::vector<std::pair<float, std::uint32_t>>& out) const;
+  //! Builds the k-d tree behind knn() and the searches past the grid now, in the calling thread
+  //! (else the first query that needs it builds it while the others wait).
+  void build_tree() const;
 
  private:
   template <bool kSlots, class F>

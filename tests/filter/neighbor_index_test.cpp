@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 
 namespace scanclean {
@@ -102,6 +103,34 @@ TEST(NeighborIndexTest, KnnMatchesBruteForce) {
       for (std::size_t k = 0; k < 20; ++k) EXPECT_NEAR(got[k].first, want[k], 1e-6f);
       EXPECT_FLOAT_EQ((pts[got[19].second] - q).squaredNorm(), got[19].first);
     }
+  }
+}
+
+// rough_kth_distance against its definition, by brute force (the oracle): the median over the
+// sampled points of the distance to the ks-th nearest among every step-th point. The larger
+// cloud's subsample is searched as two trees (at 8,192 subsampled points and more), the smaller
+// one's as one.
+TEST(NeighborIndexTest, RoughKthDistanceMatchesBruteForce) {
+  std::mt19937 rng(71);  // seed 71
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::normal_distribution<float> g(0.0f, 0.01f);
+  for (const std::size_t n : {std::size_t{30000}, std::size_t{200000}}) {
+    std::vector<Eigen::Vector3f> p(n);
+    for (auto& x : p) x = Eigen::Vector3f(u(rng), u(rng), g(rng));
+    const std::size_t kk = 9, samples = 301;
+    const std::size_t step = std::clamp<std::size_t>(n / (8 * kk), 1, 16);
+    const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
+    std::vector<double> est(samples);
+    for (std::size_t k = 0; k < samples; ++k) {
+      const Eigen::Vector3f& q = p[k * n / samples];
+      std::vector<float> d2;
+      for (std::size_t i = 0; i < n; i += step) d2.push_back((p[i] - q).squaredNorm());
+      std::nth_element(d2.begin(), d2.begin() + static_cast<std::ptrdiff_t>(ks - 1), d2.end());
+      est[k] = std::sqrt(static_cast<double>(d2[ks - 1]));
+    }
+    std::nth_element(est.begin(), est.begin() + (samples - 1) / 2, est.end());
+    const double want = est[(samples - 1) / 2];
+    EXPECT_NEAR(rough_kth_distance(p, kk, samples), want, 1e-6 * want) << n << " points";
   }
 }
 
