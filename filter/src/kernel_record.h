@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <type_traits>
 
 namespace scanclean::detail {
 
@@ -33,7 +34,9 @@ struct alignas(64) KernelRecord {
     //! sigma_j^2, the kernel is truncated (e_j >= t^2) farther than t sigma_j from its centre.
     kSigma,
   };
-  float f[kFloats] = {};
+  //! Not initialised (a trivial type): the kernels phase fills its arrays in parallel instead of
+  //! zeroing them first on one thread; set() writes every field.
+  float f[kFloats];
 
   Eigen::Vector3f centre() const { return {f[kCx], f[kCy], f[kCz]}; }
   Eigen::Vector3f normal() const { return {f[kNx], f[kNy], f[kNz]}; }
@@ -58,14 +61,16 @@ struct alignas(64) KernelRecord {
   }
 };
 static_assert(sizeof(KernelRecord) == 16 * sizeof(float), "one cache line per kernel");
+static_assert(std::is_trivial_v<KernelRecord>);
 
 //! A kernel's weighted fit as fitted (kernel_fit.h): m = c minus the centre point, the sum of
 //! the chi weights, and the weighted covariance (m^2), for the leave-one-out downdate of the
 //! off-surface test (off_surface.h).
 struct KernelFitRecord {
-  float m[3] = {0, 0, 0};
-  float weight = 0;
-  float cov[6] = {0, 0, 0, 0, 0, 0};  //!< 00 11 22 01 02 12
+  // Not initialised (a trivial type, as KernelRecord); set() writes every field.
+  float m[3];
+  float weight;
+  float cov[6];  //!< 00 11 22 01 02 12
 
   Eigen::Vector3d offset() const { return {m[0], m[1], m[2]}; }
   Eigen::Matrix3d covariance() const {
@@ -84,5 +89,7 @@ struct KernelFitRecord {
     cov[5] = static_cast<float>(c(1, 2));
   }
 };
+
+static_assert(std::is_trivial_v<KernelFitRecord>);
 
 }  // namespace scanclean::detail

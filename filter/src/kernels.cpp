@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include "cell_select.h"
 #include "kernel_fit.h"
@@ -37,10 +38,13 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
     }
   }
   auto candidate = [&](std::size_t i) { return listed ? slot[i] : i / stride; };
+  // The records and fits of the valid kernels are written by the parallel loop below (pages
+  // first touched there, not zeroed by this thread); the others are never read.
   std::vector<std::uint8_t> valid(nk, 0);
-  std::vector<KernelRecord> records(nk);  // candidate order first
-  std::vector<KernelFitRecord> fits(prm.keep_fits ? nk : 0);
-  nref.assign(n, Eigen::Vector3f::Zero());
+  FillLaterVector<KernelRecord> records(nk);  // candidate order first
+  FillLaterVector<KernelFitRecord> fits(prm.keep_fits ? nk : 0);
+  nref.resize(n);  // Eigen vectors: not initialised, zeroed in parallel
+  parallel_each(n, [&](std::size_t i) { nref[i].setZero(); });
   const double floor2 = o.eigen_floor * o.eigen_floor;
   const bool by_slot = ids == PointIndexIds::kSlots;
   PlaneRefit refit;
@@ -123,48 +127,60 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   point_index.reset();  // the point index is not needed any more (memory)
   std::vector<std::uint32_t>().swap(slot);
   KernelSet ks;
-  for (std::size_t i = 0; i < n; ++i) ks.fitted += nref[i].squaredNorm() > 0 ? 1 : 0;
+  ks.fitted = count_where(n, [&](std::size_t i) { return nref[i].squaredNorm() > 0; });
   for (std::uint8_t r : refitted) {
     ks.refitted += r == 1 ? 1 : 0;
     ks.split += r == 2 ? 1 : 0;
   }
-  // Compact the valid kernels (in place, with their fits), index their centres, then permute
-  // the records in place into the index's slot order, cycle by cycle (no second copy: memory).
-  std::size_t m = 0;
-  for (std::size_t k = 0; k < nk; ++k) {
-    if (!valid[k]) continue;
-    if (m != k) {
-      records[m] = records[k];
-      if (prm.keep_fits) fits[m] = fits[k];
-    }
-    ++m;
-  }
+  // The valid kernels, their centres indexed; then the records (and fits) into the index's
+  // slot order. Thinned kernels (at most one point in two) are gathered in parallel into a new
+  // array, one array at a time: the copy costs at most 32 bytes a point, and at k = 250 on the
+  // 2.1M-point sphere of the speed suite (every 2nd point) the run's peak lies elsewhere. A
+  // kernel at every point would raise the peak by 64 bytes a point: those are moved in place,
+  // cycle by cycle (one thread; the moves' loads are scattered).
+  const std::vector<std::uint32_t> kept =
+      indices_where(nk, [&](std::size_t k) { return valid[k] != 0; });
   std::vector<std::uint8_t>().swap(valid);
-  records.resize(m);
-  if (prm.keep_fits) fits.resize(m);
+  const std::size_t m = kept.size();
   std::vector<Eigen::Vector3f> centres(m);
-  for (std::size_t k = 0; k < m; ++k) centres[k] = records[k].centre();
+  parallel_each(m, [&](std::size_t k) { centres[k] = records[kept[k]].centre(); });
   ks.index = std::make_unique<NeighborIndex>(
       std::move(centres),
       grid_cell_for((prm.kernel_cell > 0 ? prm.kernel_cell : prm.cell) * prm.gather_factor));
   const auto& order = ks.index->order();
-  std::vector<bool> done(m, false);
-  for (std::size_t s0 = 0; s0 < m; ++s0) {
-    if (done[s0]) continue;
-    const KernelRecord first = records[s0];
-    const KernelFitRecord first_fit = prm.keep_fits ? fits[s0] : KernelFitRecord{};
-    std::size_t s = s0;
-    while (true) {
-      done[s] = true;
-      const std::size_t from = order[s];
-      if (from == s0) {
-        records[s] = first;
-        if (prm.keep_fits) fits[s] = first_fit;
-        break;
+  if (2 * m <= n) {
+    auto gather = [&](auto& v) {
+      std::remove_reference_t<decltype(v)> to(m);
+      parallel_each(m, [&](std::size_t s) { to[s] = v[kept[order[s]]]; });
+      v.swap(to);
+    };
+    gather(records);
+    if (prm.keep_fits) gather(fits);
+  } else {
+    for (std::size_t k = 0; k < m; ++k) {  // compact: kept[k] >= k
+      records[k] = records[kept[k]];
+      if (prm.keep_fits) fits[k] = fits[kept[k]];
+    }
+    records.resize(m);
+    if (prm.keep_fits) fits.resize(m);
+    std::vector<bool> done(m, false);
+    for (std::size_t s0 = 0; s0 < m; ++s0) {
+      if (done[s0]) continue;
+      const KernelRecord first = records[s0];
+      const KernelFitRecord first_fit = prm.keep_fits ? fits[s0] : KernelFitRecord{};
+      std::size_t s = s0;
+      while (true) {
+        done[s] = true;
+        const std::size_t from = order[s];
+        if (from == s0) {
+          records[s] = first;
+          if (prm.keep_fits) fits[s] = first_fit;
+          break;
+        }
+        records[s] = records[from];
+        if (prm.keep_fits) fits[s] = fits[from];
+        s = from;
       }
-      records[s] = records[from];
-      if (prm.keep_fits) fits[s] = fits[from];
-      s = from;
     }
   }
   ks.records = std::move(records);

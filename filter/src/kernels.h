@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "fill_later.h"
 #include "kernel_record.h"
 #include "neighbor_index.h"
 #include "point_set.h"
@@ -20,12 +21,12 @@ namespace scanclean::detail {
 
 //! The frozen kernels of one pass, in the slot order of their centre index.
 struct KernelSet {
-  std::unique_ptr<NeighborIndex> index;  //!< over the centres (float, relative to the origin)
-  std::vector<KernelRecord> records;     //!< one per slot of index
-  std::vector<KernelFitRecord> fits;     //!< one per slot, when kept (KernelParams::keep_fits)
-  std::size_t fitted = 0;                //!< points that got a kernel (including w = 0)
-  std::size_t refitted = 0;              //!< kernels refitted on their own sheet (plane_refit.h)
-  std::size_t split = 0;                 //!< kernels fitted on their own face of a crease
+  std::unique_ptr<NeighborIndex> index;   //!< over the centres (float, relative to the origin)
+  FillLaterVector<KernelRecord> records;  //!< one per slot of index
+  FillLaterVector<KernelFitRecord> fits;  //!< one per slot, when kept (KernelParams::keep_fits)
+  std::size_t fitted = 0;                 //!< points that got a kernel (including w = 0)
+  std::size_t refitted = 0;               //!< kernels refitted on their own sheet (plane_refit.h)
+  std::size_t split = 0;                  //!< kernels fitted on their own face of a crease
 };
 
 struct KernelParams {

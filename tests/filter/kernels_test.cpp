@@ -31,7 +31,9 @@ Fixture plane(double h) {
   return f;
 }
 
-TEST(KernelsTest, RecordsMatchABruteForceFitInSlotOrder) {
+// A kernel at every point (the records moved into slot order in place) and at every 2nd (moved
+// into a new array): the same checks.
+void check_records_in_slot_order(std::size_t stride) {
   const double h = 0.008;
   Fixture f = plane(h);
   const PointSet& d = f.d;
@@ -39,20 +41,22 @@ TEST(KernelsTest, RecordsMatchABruteForceFitInSlotOrder) {
   KernelParams prm;
   prm.options = &o;
   prm.cell = h;
+  prm.stride = stride;
   prm.keep_fits = true;
   std::vector<Eigen::Vector3f> nref;
   const KernelSet ks = build_kernels(d, f.index, PointIndexIds::kSlots, prm, nref, "kernels");
   EXPECT_FALSE(f.index);  // released
   ASSERT_EQ(ks.records.size(), ks.index->size());
   ASSERT_EQ(ks.fits.size(), ks.records.size());
-  EXPECT_EQ(ks.fitted, d.p.size());  // every point of a dense plane gets a kernel
+  // Every site of a dense plane gets a kernel.
+  EXPECT_EQ(ks.fitted, (d.p.size() + stride - 1) / stride);
   // Centre k of the index's slot order is record k's centre.
   for (std::size_t s = 0; s < ks.records.size(); ++s)
     ASSERT_EQ(ks.index->slot_point(s), ks.records[s].centre()) << s;
   // Each kernel against a brute-force fit of its centre point's neighbours: find the point
   // whose fit has that centre.
   std::size_t checked = 0;
-  for (std::size_t i = 0; i < d.p.size(); i += 37) {
+  for (std::size_t i = 0; i < d.p.size(); i += 37 * stride) {
     KernelFit fit;
     ASSERT_TRUE(fit_kernel(
         d, i, h, o.k_min, false, o.eigen_floor,
@@ -67,7 +71,7 @@ TEST(KernelsTest, RecordsMatchABruteForceFitInSlotOrder) {
     ASSERT_LT(found, ks.records.size()) << "point " << i;
     const KernelRecord& r = ks.records[found];
     EXPECT_NEAR(r.h2(), h * h, 1e-12);
-    EXPECT_EQ(r.weight(), 1.0f);
+    EXPECT_EQ(r.weight(), static_cast<float>(stride));
     EXPECT_NEAR(std::abs(r.normal().dot(fit.e.col(0).cast<float>())), 1.0f, 1e-5f);
     // The inverse covariance, floored: S^-1 n = n / max(lambda_3, (eigen_floor h)^2).
     const double floor = std::pow(o.eigen_floor * h, 2);
@@ -81,10 +85,17 @@ TEST(KernelsTest, RecordsMatchABruteForceFitInSlotOrder) {
             r.f[KernelRecord::kQ22] * n.z());
     const double expected = 1.0 / std::max(fit.lambda[0], floor);
     EXPECT_NEAR(sn.dot(n), expected, 1e-3 * expected);
+    // The fit moved with its record.
     EXPECT_NEAR(ks.fits[found].weight, fit.weight, 1e-4 * fit.weight);
+    EXPECT_LT((ks.fits[found].offset() - fit.m).norm(), 1e-6);
     ++checked;
   }
-  EXPECT_GT(checked, 50u);
+  EXPECT_GT(checked, 50 / stride);
+}
+
+TEST(KernelsTest, RecordsMatchABruteForceFitInSlotOrder) {
+  check_records_in_slot_order(1);
+  check_records_in_slot_order(2);
 }
 
 TEST(KernelsTest, StrideKeepsEveryStrideThPointWithItsWeightScaled) {
