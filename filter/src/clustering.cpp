@@ -10,6 +10,7 @@
 #include <limits>
 #include <utility>
 
+#include "fill_later.h"
 #include "parallel.h"
 #include "radix_sort.h"
 
@@ -33,13 +34,16 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   }
   {
     // Decreasing L, then index (cand is in index order and the sort stable): deterministic.
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> key(cand.size()), scratch;
+    struct ByRank {  // trivial: the arrays are filled in parallel, not zeroed first
+      std::uint32_t key, point;
+    };
+    FillLaterVector<ByRank> key(cand.size()), scratch;
     parallel_each(cand.size(), [&](std::size_t k) {
       key[k] = {float_order_key(-pr.L[cand[k]]), cand[k]};
     });
     stable_radix_sort(
-        key, [](const auto& e) { return std::uint64_t{e.first}; }, scratch);
-    parallel_each(cand.size(), [&](std::size_t k) { cand[k] = key[k].second; });
+        key, [](const ByRank& e) { return std::uint64_t{e.key}; }, scratch);
+    parallel_each(cand.size(), [&](std::size_t k) { cand[k] = key[k].point; });
   }
   // The candidates' bounding box, in parallel (their positions are read in rank order, scattered).
   using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
@@ -106,22 +110,26 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     return static_cast<std::uint64_t>(cx) + nx * static_cast<std::uint64_t>(cy) +
            nxy * static_cast<std::uint64_t>(cz);
   };
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> by_cell(nj);  // (cell, point)
+  struct ByCell {  // trivial: the arrays are filled in parallel, not zeroed first
+    std::uint64_t cell;
+    std::uint32_t point;
+  };
+  FillLaterVector<ByCell> by_cell(nj);
   parallel_each(nj, [&](std::size_t j) {
     const Eigen::Vector3d& p = x[joiners[j]];
     by_cell[j] = {dense(coord(p[0], 0), coord(p[1], 1), coord(p[2], 2)), joiners[j]};
   });
   std::vector<std::uint32_t>().swap(joiners);
   {
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch;
+    FillLaterVector<ByCell> scratch;
     stable_radix_sort(
-        by_cell, [](const auto& e) { return e.first; }, scratch);
+        by_cell, [](const ByCell& e) { return e.cell; }, scratch);
   }
   std::vector<Eigen::Vector3d> cell_x(nj);
   std::vector<Eigen::Vector3f> cell_n(oriented ? nj : 0);
-  std::vector<std::uint32_t> cell_rank(nj);
+  FillLaterVector<std::uint32_t> cell_rank(nj);
   parallel_each(nj, [&](std::size_t j) {
-    const std::uint32_t i = by_cell[j].second;
+    const std::uint32_t i = by_cell[j].point;
     cell_x[j] = x[i];
     if (oriented) cell_n[j] = pr.normal[i];
     cell_rank[j] = rank_of[i];
@@ -143,19 +151,19 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
       if (!placed[r]) {  // first use in this range: from the start
         c = static_cast<std::size_t>(
             std::lower_bound(by_cell.begin(), by_cell.end(), target,
-                             [](const auto& e, std::uint64_t t) { return e.first < t; }) -
+                             [](const ByCell& e, std::uint64_t t) { return e.cell < t; }) -
             by_cell.begin());
         placed[r] = true;
-      } else if (c < nj && by_cell[c].first < target) {
+      } else if (c < nj && by_cell[c].cell < target) {
         std::size_t step = 1, lo_c = c;
-        while (c + step < nj && by_cell[c + step].first < target) {
+        while (c + step < nj && by_cell[c + step].cell < target) {
           lo_c = c + step;
           step *= 2;
         }
         c = static_cast<std::size_t>(
             std::lower_bound(by_cell.begin() + static_cast<std::ptrdiff_t>(lo_c),
                              by_cell.begin() + static_cast<std::ptrdiff_t>(std::min(c + step, nj)),
-                             target, [](const auto& e, std::uint64_t t) { return e.first < t; }) -
+                             target, [](const ByCell& e, std::uint64_t t) { return e.cell < t; }) -
             by_cell.begin());
       }
       cursor[r] = c;
@@ -176,8 +184,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
             const std::size_t r = static_cast<std::size_t>(3 * (cz - c3[2] + 1) + (cy - c3[1] + 1));
             const std::uint64_t first = dense(a0[0], cy, cz), last = dense(a1[0], cy, cz);
             for (std::size_t q = seek(r, dense(c3[0] - 1, cy, cz));
-                 q < nj && by_cell[q].first <= last; ++q) {
-              if (by_cell[q].first < first) continue;
+                 q < nj && by_cell[q].cell <= last; ++q) {
+              if (by_cell[q].cell < first) continue;
               const std::uint32_t rq = cell_rank[q];
               if (rq >= k) continue;
               const double d2 = (cell_x[q] - p).squaredNorm();
