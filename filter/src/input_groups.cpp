@@ -4,7 +4,6 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -152,22 +151,8 @@ FarSplit split_far_points(const PointCloud& input) {
     const Eigen::Vector3d& p = input.positions[i];
     return (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all();
   };
-  // Counted first (in parallel), so that both lists are allocated once.
-  std::atomic<std::size_t> far_count{0};
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      std::size_t c = 0;
-                      for (std::size_t i = r.begin(); i < r.end(); ++i) c += inside(i) ? 0 : 1;
-                      far_count.fetch_add(c, std::memory_order_relaxed);
-                    });
-  if (far_count.load() == 0) {  // the common case: every point near
-    split.near.resize(n);
-    parallel_each(n, [&](std::size_t i) { split.near[i] = i; });
-    return split;
-  }
-  split.far.reserve(far_count.load());
-  split.near.reserve(n - far_count.load());
-  for (std::size_t i = 0; i < n; ++i) (inside(i) ? split.near : split.far).push_back(i);
+  split.near = indices_where<std::size_t>(n, inside);
+  split.far = indices_where<std::size_t>(n, [&](std::size_t i) { return !inside(i); });
   // No point in the box: there is no bulk to keep the others apart from (a few points, whose
   // percentiles are single points). One group, so that the far group's own split, which
   // run_split makes next, always has fewer points than the cloud it came from.

@@ -2,7 +2,6 @@
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
-#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
@@ -97,19 +96,8 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
     inv_ = ids_;
     return;
   }
-  using Box = std::pair<Eigen::Vector3f, Eigen::Vector3f>;
-  const auto [lo, hi] = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, n, 4096), Box{points[0], points[0]},
-      [&](const tbb::blocked_range<std::size_t>& r, Box b) {
-        for (std::size_t i = r.begin(); i < r.end(); ++i) {
-          b.first = b.first.cwiseMin(points[i]);
-          b.second = b.second.cwiseMax(points[i]);
-        }
-        return b;
-      },
-      [](const Box& a, const Box& b) {
-        return Box{a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)};
-      });
+  const Eigen::AlignedBox3f box = detail::bounding_box_of(points);
+  const Eigen::Vector3f lo = box.min(), hi = box.max();
   const double max_extent = (hi - lo).cast<double>().maxCoeff();
   constexpr double kMaxCells = (1 << 21) - 2;
   if (max_extent / cell > kMaxCells) cell = max_extent / kMaxCells * (1 + 1e-6);

@@ -170,9 +170,8 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
       st.low_likelihood += c.low_likelihood;
       st.displaced += c.displaced;
     });
-    const std::vector<std::uint32_t> flagged =
-        indices_where(N, [&](std::size_t i) { return in_flag[i] != 0; });
-    std::vector<std::size_t> idx(flagged.begin(), flagged.end());
+    const std::vector<std::size_t> idx =
+        indices_where<std::size_t>(N, [&](std::size_t i) { return in_flag[i] != 0; });
     PointCloud& ol = result.outliers;
     ol = select(input, idx);
     ol.grid = OrganizedGrid{};

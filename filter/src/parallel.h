@@ -108,22 +108,25 @@ std::size_t first_where(std::size_t n, Pred&& pred) {
       [](std::size_t a, std::size_t b) { return std::min(a, b); });
 }
 
-//! The bounding box of the points, in parallel (min and max: the same box in any order).
-inline Eigen::AlignedBox3d bounding_box_of(const std::vector<Eigen::Vector3d>& p) {
+//! The bounding box of the points (Eigen 3-vectors of float or double), in parallel (min and
+//! max: the same box in any order).
+template <class Vec>
+Eigen::AlignedBox<typename Vec::Scalar, 3> bounding_box_of(const std::vector<Vec>& p) {
+  using Box = Eigen::AlignedBox<typename Vec::Scalar, 3>;
   return tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, p.size(), 4096), Eigen::AlignedBox3d(),
-      [&](const tbb::blocked_range<std::size_t>& r, Eigen::AlignedBox3d box) {
+      tbb::blocked_range<std::size_t>(0, p.size(), 4096), Box(),
+      [&](const tbb::blocked_range<std::size_t>& r, Box box) {
         for (std::size_t i = r.begin(); i < r.end(); ++i) box.extend(p[i]);
         return box;
       },
-      [](const Eigen::AlignedBox3d& a, const Eigen::AlignedBox3d& b) { return a.merged(b); });
+      [](const Box& a, const Box& b) { return a.merged(b); });
 }
 
 //! The i in [0, n) with pred(i), in increasing order, found in parallel: counted chunk by chunk,
 //! then written from each chunk's offset (pred is called twice per i). The same list for any
 //! thread count.
-template <class Pred>
-std::vector<std::uint32_t> indices_where(std::size_t n, Pred&& pred) {
+template <class Index = std::uint32_t, class Pred>
+std::vector<Index> indices_where(std::size_t n, Pred&& pred) {
   constexpr std::size_t kChunk = std::size_t{1} << 15;
   const std::size_t chunks = std::clamp<std::size_t>(n / kChunk, 1, 256);
   auto chunk_begin = [&](std::size_t c) { return n * c / chunks; };
@@ -134,11 +137,11 @@ std::vector<std::uint32_t> indices_where(std::size_t n, Pred&& pred) {
     at[c + 1] = m;
   });
   for (std::size_t c = 0; c < chunks; ++c) at[c + 1] += at[c];
-  std::vector<std::uint32_t> out(at[chunks]);
+  std::vector<Index> out(at[chunks]);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
     std::size_t m = at[c];
     for (std::size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i)
-      if (pred(i)) out[m++] = static_cast<std::uint32_t>(i);
+      if (pred(i)) out[m++] = static_cast<Index>(i);
   });
   return out;
 }

@@ -73,7 +73,7 @@ TEST(ParallelTest, BoundingBoxAndMedianMatchSerialOnes) {
       });
     }
   }
-  EXPECT_TRUE(bounding_box_of({}).isEmpty());
+  EXPECT_TRUE(bounding_box_of(std::vector<Eigen::Vector3d>{}).isEmpty());
   EXPECT_EQ(median_of(std::vector<double>{}), 0.0);
   EXPECT_EQ(median_of(std::vector<std::size_t>{5, 1, 4, 2}), 2u);  // the lower median
 }
