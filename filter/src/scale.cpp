@@ -11,7 +11,6 @@
 #include "kernel_fit.h"
 #include "noise_scale.h"
 #include "parallel.h"
-#include "radix_sort.h"
 #include "scale_selection.h"
 #include "scanclean/core/errors.h"
 #include "select.h"

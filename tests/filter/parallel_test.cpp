@@ -1,6 +1,7 @@
 // The filter's parallel helpers (filter/src/parallel.h) against serial loops (the oracles): the
 // lists and counts of indices with a property, the first such index, the bounding box and the
-// median, on arrays of a few chunks and of many, with one and two threads.
+// median, on arrays of a few chunks and of many, with one and two threads; the radix selection
+// against std::nth_element.
 
 #include "../../filter/src/parallel.h"
 
@@ -76,6 +77,45 @@ TEST(ParallelTest, BoundingBoxAndMedianMatchSerialOnes) {
   EXPECT_TRUE(bounding_box_of(std::vector<Eigen::Vector3d>{}).isEmpty());
   EXPECT_EQ(median_of(std::vector<double>{}), 0.0);
   EXPECT_EQ(median_of(std::vector<std::size_t>{5, 1, 4, 2}), 2u);  // the lower median
+}
+
+// radix_select against std::nth_element (the oracle) on arrays below and above the size where
+// it narrows in parallel: wide ranges with both signs, a narrow range (many values share their
+// leading key bits), many ties, all values equal; at the ends, the median and random ranks; with
+// one and two threads.
+template <class T>
+void check_radix_select(std::uint32_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<T> wide(0, 1000);
+  std::uniform_real_distribution<T> narrow(T(0.0125), T(0.0126));
+  std::uniform_int_distribution<int> few(-3, 3);
+  for (const std::size_t n : {std::size_t{1}, std::size_t{1000}, std::size_t{300000}}) {
+    for (int kind = 0; kind < 4; ++kind) {
+      std::vector<T> v(n);
+      for (T& x : v)
+        x = kind == 0 ? wide(rng) : kind == 1 ? narrow(rng) : kind == 2 ? T(few(rng)) / 8 : T(7);
+      std::vector<std::size_t> ranks = {0, n - 1, (n - 1) / 2};
+      for (int r = 0; r < 5; ++r) ranks.push_back(rng() % n);
+      for (const std::size_t k : ranks) {
+        std::vector<T> sorted = v;
+        std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k),
+                         sorted.end());
+        for (const int threads : {1, 2}) {
+          const std::vector<T> before = v;
+          T got = 0;
+          tbb::task_arena(threads).execute([&] { got = radix_select(v, k); });
+          EXPECT_EQ(got, sorted[k])
+              << n << " values, kind " << kind << ", rank " << k << ", " << threads << " threads";
+          EXPECT_EQ(v, before) << "the input is not changed";
+        }
+      }
+    }
+  }
+}
+
+TEST(ParallelTest, RadixSelectMatchesNthElement) {
+  check_radix_select<float>(53);   // seed 53
+  check_radix_select<double>(59);  // seed 59
 }
 
 }  // namespace

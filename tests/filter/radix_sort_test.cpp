@@ -1,6 +1,6 @@
 // The stable radix sort (filter/src/radix_sort.h) against std::stable_sort (the oracle): narrow
-// and 64-bit keys, many ties, arrays sorted in parallel chunks; and the float key's order against
-// float's own; the radix selection against std::nth_element.
+// and 64-bit keys, many ties, arrays sorted in parallel chunks; and the float and double keys'
+// order against the values' own.
 
 #include "../../filter/src/radix_sort.h"
 
@@ -77,45 +77,6 @@ void check_order_key(Key&& key, std::uint32_t seed) {
 TEST(RadixSortTest, OrderKeysOrderAsTheirValues) {
   check_order_key<float>(float_order_key, 43);    // seed 43
   check_order_key<double>(double_order_key, 47);  // seed 47
-}
-
-// radix_select against std::nth_element (the oracle) on arrays below and above the size where
-// it narrows in parallel: wide ranges with both signs, a narrow range (many values share their
-// leading key bits), many ties, all values equal; at the ends, the median and random ranks; with
-// one and two threads.
-template <class T>
-void check_radix_select(std::uint32_t seed) {
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<T> wide(0, 1000);
-  std::uniform_real_distribution<T> narrow(T(0.0125), T(0.0126));
-  std::uniform_int_distribution<int> few(-3, 3);
-  for (const std::size_t n : {std::size_t{1}, std::size_t{1000}, std::size_t{300000}}) {
-    for (int kind = 0; kind < 4; ++kind) {
-      std::vector<T> v(n);
-      for (T& x : v)
-        x = kind == 0 ? wide(rng) : kind == 1 ? narrow(rng) : kind == 2 ? T(few(rng)) / 8 : T(7);
-      std::vector<std::size_t> ranks = {0, n - 1, (n - 1) / 2};
-      for (int r = 0; r < 5; ++r) ranks.push_back(rng() % n);
-      for (const std::size_t k : ranks) {
-        std::vector<T> sorted = v;
-        std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k),
-                         sorted.end());
-        for (const int threads : {1, 2}) {
-          const std::vector<T> before = v;
-          T got = 0;
-          tbb::task_arena(threads).execute([&] { got = radix_select(v, k); });
-          EXPECT_EQ(got, sorted[k])
-              << n << " values, kind " << kind << ", rank " << k << ", " << threads << " threads";
-          EXPECT_EQ(v, before) << "the input is not changed";
-        }
-      }
-    }
-  }
-}
-
-TEST(RadixSortTest, RadixSelectMatchesNthElement) {
-  check_radix_select<float>(53);   // seed 53
-  check_radix_select<double>(59);  // seed 59
 }
 
 }  // namespace
