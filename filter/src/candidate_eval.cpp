@@ -5,24 +5,12 @@
 #include <cstdint>
 #include <limits>
 
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
-
 // The loops over a point's candidates are written once with Google Highway and compiled for
 // every instruction set it targets on the build machine's architecture; the best one the
 // processor has runs. The sums run in vectors of 8 floats (kCandidatePadding): AVX2 and AVX-512
 // sum in the same order and give the same results (AVX-512 takes 16 lanes in the loops without
 // sums, and forms the step's terms 16 at a time before adding them 8 at a time); 4-lane targets
 // (SSE4, NEON) sum in another order.
-namespace scanclean::detail {
-// append_records on targets without 16-lane vectors: the AVX2 transposition where the
-// processor has AVX2, else one record at a time (defined below, once).
-void append_records_8(CandidateBuffer& buffer, const KernelRecord* records,
-                      const std::uint32_t* slots, std::size_t n, const float origin[3],
-                      float slab2);
-}  // namespace scanclean::detail
-
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "candidate_eval.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -334,25 +322,47 @@ float FastExp(float a) {
   return hn::GetLane(vexp(d, hn::Set(d, a)));
 }
 
+#if HWY_ARCH_X86 && (HWY_TARGET <= HWY_AVX3 || HWY_TARGET == HWY_AVX2)
+// The first two rounds of the transposition of 8 records r[i] (a vector each, or a half each):
+// records interleaved in pairs within each block of 4 lanes, then pairs of those, which
+// leaves in block b of u[k] field 4 b + k of records 0-3 (of u[k + 4]: records 4-7).
+template <class DV, class VV = hn::Vec<DV>>
+HWY_INLINE void interleave_records(DV d, const VV (&r)[8], VV (&u)[8]) {
+  const hn::Repartition<std::uint64_t, DV> d64;
+  auto lower64 = [&](VV x, VV y) {
+    return hn::BitCast(d, hn::InterleaveLower(d64, hn::BitCast(d64, x), hn::BitCast(d64, y)));
+  };
+  auto upper64 = [&](VV x, VV y) {
+    return hn::BitCast(d, hn::InterleaveUpper(d64, hn::BitCast(d64, x), hn::BitCast(d64, y)));
+  };
+  VV t[8];
+  for (std::size_t i = 0; i < 8; i += 2) {
+    t[i] = hn::InterleaveLower(d, r[i], r[i + 1]);
+    t[i + 1] = hn::InterleaveUpper(d, r[i], r[i + 1]);
+  }
+  for (std::size_t i = 0; i < 8; i += 4) {
+    u[i] = lower64(t[i], t[i + 2]);
+    u[i + 1] = upper64(t[i], t[i + 2]);
+    u[i + 2] = lower64(t[i + 1], t[i + 3]);
+    u[i + 3] = upper64(t[i + 1], t[i + 3]);
+  }
+}
+#endif
+
 #if HWY_ARCH_X86 && HWY_TARGET <= HWY_AVX3
 // The transposition of 8 records (16 floats, one vector each) into the buffer's arrays, in
-// three rounds of shuffles: pairs of records interleaved within each block of 4 lanes, then
-// pairs of those, which leaves in block b of u[k] field 4 b + k of records 0-3 (of u[k + 4]:
-// 4-7); then the blocks of u[k] and u[k + 4] paired, so that each half of a vector holds one
-// field of all 8 records. About 4 shuffles a record where the AVX2 transposition takes 6; the
-// records are aligned to their cache line (KernelRecord), so each is one aligned load.
+// three rounds of shuffles: the two of interleave_records, then the blocks of u[k] and u[k + 4]
+// paired, so that each half of a vector holds one field of all 8 records. About 4 shuffles a
+// record where the AVX2 transposition takes 6; the records are aligned to their cache line
+// (KernelRecord), so each is one aligned load. A whole group loads its records without the
+// last group's repetition and copies its 8 slots as one vector (about a tenth of the append's
+// cpu-clock samples less than one slot at a time).
 void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::uint32_t* slots,
                    std::size_t n, const float* origin, float slab2) {
   const hn::Full512<float> d16;
   const hn::Full256<float> d8;
-  const hn::Repartition<std::uint64_t, decltype(d16)> d64;
+  const hn::Full256<std::uint32_t> du8;
   using V16 = hn::Vec<decltype(d16)>;
-  auto lower64 = [&](V16 x, V16 y) {
-    return hn::BitCast(d16, hn::InterleaveLower(d64, hn::BitCast(d64, x), hn::BitCast(d64, y)));
-  };
-  auto upper64 = [&](V16 x, V16 y) {
-    return hn::BitCast(d16, hn::InterleaveUpper(d64, hn::BitCast(d64, x), hn::BitCast(d64, y)));
-  };
   const auto ox = hn::Set(d8, origin[0]), oy = hn::Set(d8, origin[1]), oz = hn::Set(d8, origin[2]),
              vslab2 = hn::Set(d8, slab2);
   // The arrays, read once: through the stores the compiler could not tell that they stay put.
@@ -364,20 +374,14 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
     // (append_records reserved room for them) but not counted.
     const std::size_t j = b.count, m = std::min<std::size_t>(8, n - k);
     V16 r[8];
-    for (std::size_t i = 0; i < 8; ++i)
-      r[i] = hn::Load(d16, records[slots[k + std::min(i, m - 1)]].f);
-    V16 t[8];
-    for (std::size_t i = 0; i < 8; i += 2) {
-      t[i] = hn::InterleaveLower(d16, r[i], r[i + 1]);
-      t[i + 1] = hn::InterleaveUpper(d16, r[i], r[i + 1]);
+    if (m == 8) {
+      for (std::size_t i = 0; i < 8; ++i) r[i] = hn::Load(d16, records[slots[k + i]].f);
+    } else {
+      for (std::size_t i = 0; i < 8; ++i)
+        r[i] = hn::Load(d16, records[slots[k + std::min(i, m - 1)]].f);
     }
     V16 u[8];
-    for (std::size_t i = 0; i < 8; i += 4) {
-      u[i] = lower64(t[i], t[i + 2]);
-      u[i + 1] = upper64(t[i], t[i + 2]);
-      u[i + 2] = lower64(t[i + 1], t[i + 3]);
-      u[i + 3] = upper64(t[i + 1], t[i + 3]);
-    }
+    interleave_records(d16, r, u);
     V16 lo[4], hi[4];  // lo[k]: fields k and 8 + k; hi[k]: fields 4 + k and 12 + k
     for (std::size_t f = 0; f < 4; ++f) {
       lo[f] = hn::OddEvenBlocks(hn::SwapAdjacentBlocks(u[f + 4]), u[f]);
@@ -398,14 +402,57 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
     put(B::kSlab2, hn::Mul(h2, vslab2));
     put(B::kH2, h2);
     put(B::kW, hn::UpperHalf(d8, hi[1]));  // record field 13
-    for (std::size_t i = 0; i < m; ++i) slot_out[j + i] = slots[k + i];
+    if (m == 8)
+      hn::StoreU(hn::LoadU(du8, slots + k), du8, slot_out + j);
+    else
+      for (std::size_t i = 0; i < m; ++i) slot_out[j + i] = slots[k + i];
     b.count += m;
   }
+}
+#elif HWY_ARCH_X86 && HWY_TARGET == HWY_AVX2
+// The transposition of 8 records into the buffer's arrays in 8-float vectors, each record's
+// two halves (fields 0-7, 8-15) one after the other, in three rounds: the two of
+// interleave_records, then the blocks of 4 of u[k] and u[k + 4] paired, which leaves one field
+// of all 8 records in each vector. A last group of fewer than 8 is appended one record at a
+// time (repeating its last record, as on AVX-512, took a fifth longer here).
+void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::uint32_t* slots,
+                   std::size_t n, const float* origin, float slab2) {
+  const hn::Full256<float> d8;
+  const hn::Full256<std::uint32_t> du;
+  using V8 = hn::Vec<decltype(d8)>;
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    const std::size_t j = b.count;
+    for (std::size_t half = 0; half < 2; ++half) {
+      V8 r[8];
+      for (std::size_t i = 0; i < 8; ++i) r[i] = hn::Load(d8, records[slots[k + i]].f + 8 * half);
+      V8 u[8];
+      interleave_records(d8, r, u);
+      V8 c[8];  // c[f]: field 8 half + f of the 8 records
+      for (std::size_t f = 0; f < 4; ++f) {
+        c[f] = hn::ConcatLowerLower(d8, u[f + 4], u[f]);
+        c[f + 4] = hn::ConcatUpperUpper(d8, u[f + 4], u[f]);
+      }
+      auto put = [&](std::size_t field, V8 v) { hn::StoreU(v, d8, b.f[field].data() + j); };
+      if (half == 0) {
+        for (std::size_t f = 0; f < 3; ++f) put(B::kCx + f, hn::Sub(c[f], hn::Set(d8, origin[f])));
+        for (std::size_t f = 3; f < 8; ++f) put(f, c[f]);  // Q00 Q11 Q22 Q01 Q02
+      } else {
+        for (std::size_t f = 0; f < 4; ++f) put(B::kQ12 + f, c[f]);  // Q12 and the normal
+        put(B::kSlab2, hn::Mul(c[4], hn::Set(d8, slab2)));           // record field 12: h^2
+        put(B::kH2, c[4]);
+        put(B::kW, c[5]);  // record field 13
+      }
+    }
+    hn::StoreU(hn::LoadU(du, slots + k), du, b.slot.data() + j);
+    b.count += 8;
+  }
+  for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 #else
 void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::uint32_t* slots,
                    std::size_t n, const float* origin, float slab2) {
-  append_records_8(b, records, slots, n, origin, slab2);
+  for (std::size_t k = 0; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 #endif
 
@@ -461,64 +508,6 @@ HWY_EXPORT(FastExp);
 HWY_EXPORT(FirstWithE);
 HWY_EXPORT(AppendRecords);
 
-namespace {
-
-#if defined(__x86_64__)
-// The transposition of 8 records into the buffer's 16 arrays: Highway has no 8 x 8 transpose
-// that serves every target, so this one is written for AVX2 (the others append one record at a
-// time).
-[[gnu::target("avx2")]] void append_avx2(CandidateBuffer& b, const KernelRecord* records,
-                                         const std::uint32_t* slots, std::size_t n,
-                                         const float origin[3], float slab2) {
-  std::size_t k = 0;
-  for (; k + 8 <= n; k += 8) {
-    const std::size_t j = b.count;
-    for (int half = 0; half < 2; ++half) {
-      __m256 r[8];
-      for (int i = 0; i < 8; ++i) r[i] = _mm256_loadu_ps(records[slots[k + i]].f + 8 * half);
-      const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
-      const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
-      const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
-      const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
-      const __m256 u0 = _mm256_shuffle_ps(t0, t2, 0x44), u1 = _mm256_shuffle_ps(t0, t2, 0xEE);
-      const __m256 u2 = _mm256_shuffle_ps(t1, t3, 0x44), u3 = _mm256_shuffle_ps(t1, t3, 0xEE);
-      const __m256 u4 = _mm256_shuffle_ps(t4, t6, 0x44), u5 = _mm256_shuffle_ps(t4, t6, 0xEE);
-      const __m256 u6 = _mm256_shuffle_ps(t5, t7, 0x44), u7 = _mm256_shuffle_ps(t5, t7, 0xEE);
-      __m256 c[8];
-      c[0] = _mm256_permute2f128_ps(u0, u4, 0x20);
-      c[1] = _mm256_permute2f128_ps(u1, u5, 0x20);
-      c[2] = _mm256_permute2f128_ps(u2, u6, 0x20);
-      c[3] = _mm256_permute2f128_ps(u3, u7, 0x20);
-      c[4] = _mm256_permute2f128_ps(u0, u4, 0x31);
-      c[5] = _mm256_permute2f128_ps(u1, u5, 0x31);
-      c[6] = _mm256_permute2f128_ps(u2, u6, 0x31);
-      c[7] = _mm256_permute2f128_ps(u3, u7, 0x31);
-      if (half == 0) {
-        for (int f = 0; f < 3; ++f)
-          _mm256_storeu_ps(&b.f[f][j], _mm256_sub_ps(c[f], _mm256_set1_ps(origin[f])));
-        for (int f = 3; f < 8; ++f) _mm256_storeu_ps(&b.f[f][j], c[f]);
-      } else {
-        for (int f = 0; f < 4; ++f) _mm256_storeu_ps(&b.f[8 + f][j], c[f]);  // q12 n
-        _mm256_storeu_ps(&b.f[CandidateBuffer::kSlab2][j],
-                         _mm256_mul_ps(c[4], _mm256_set1_ps(slab2)));
-        _mm256_storeu_ps(&b.f[CandidateBuffer::kH2][j], c[4]);
-        _mm256_storeu_ps(&b.f[CandidateBuffer::kW][j], c[5]);
-      }
-    }
-    for (int i = 0; i < 8; ++i) b.slot[j + i] = slots[k + i];
-    b.count += 8;
-  }
-  for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
-}
-
-bool have_avx2() {
-  static const bool yes = __builtin_cpu_supports("avx2");
-  return yes;
-}
-#endif
-
-}  // namespace
-
 double StepSums::likelihood() const {
   return std::exp(-0.5 * static_cast<double>(e_min)) * slab_sum;
 }
@@ -545,19 +534,6 @@ void append_records(CandidateBuffer& buffer, const KernelRecord* records,
                     const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2) {
   buffer.reserve(buffer.count + n);
   HWY_DYNAMIC_DISPATCH(AppendRecords)(buffer, records, slots, n, origin, slab2);
-}
-
-void append_records_8(CandidateBuffer& buffer, const KernelRecord* records,
-                      const std::uint32_t* slots, std::size_t n, const float origin[3],
-                      float slab2) {
-#if defined(__x86_64__)
-  if (have_avx2()) {
-    append_avx2(buffer, records, slots, n, origin, slab2);
-    return;
-  }
-#endif
-  for (std::size_t k = 0; k < n; ++k)
-    buffer.push_record(slots[k], records[slots[k]], origin, slab2);
 }
 
 float fast_exp(float a) {

@@ -106,7 +106,7 @@ struct StepSums {
 };
 
 //! Appends the kernels records[slots[k]], k < n, with centres relative to origin; on x86, 8
-//! records at a time by a transposition in registers (AVX-512 through Highway, else AVX2).
+//! records at a time by a transposition in registers (Highway, on AVX-512 and AVX2).
 void append_records(CandidateBuffer& buffer, const KernelRecord* records,
                     const std::uint32_t* slots, std::size_t n, const float origin[3], float slab2);
 
