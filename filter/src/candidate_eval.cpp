@@ -99,6 +99,19 @@ HWY_INLINE void e_and_d(DV d, const CandidateBuffer& b, std::size_t j, VV xs, VV
                     hn::MulAdd(dy, field(d, b, B::kNy, j), hn::Mul(dx, field(d, b, B::kNx, j))));
 }
 
+// The smallest lane of v, +inf where every lane is +inf. Highway 1.0.3's portable fallback
+// (EMU128) starts its MinOfLanes from the largest finite float and returned that for a vector
+// of +inf: a point no kernel kept looked kept (seen in the tests of a clang build).
+template <class DV>
+HWY_INLINE float min_lane(DV d, hn::Vec<DV> v) {
+  const float m = hn::GetLane(hn::MinOfLanes(d, v));
+#if HWY_TARGET == HWY_EMU128
+  const float inf = std::numeric_limits<float>::infinity();
+  if (hn::AllTrue(d, hn::Eq(v, hn::Set(d, inf)))) return inf;
+#endif
+  return m;
+}
+
 // Candidates [j, e) in whole vectors of dv: e_j kept where within the slab and, with
 // kTruncate, below t2 (else +inf), stored with d_j; returns the smallest kept e_j (+inf if
 // none).
@@ -122,7 +135,7 @@ HWY_INLINE float store_e_and_d(DV d, CandidateBuffer& b, std::size_t j, std::siz
     hn::StoreU(em, d, e_out + j);
     hn::StoreU(dist, d, d_out + j);
   }
-  return hn::GetLane(hn::MinOfLanes(d, vmin));
+  return min_lane(d, vmin);
 }
 
 // The padded candidates in whole vectors of DL, then of D for a last 8.
@@ -247,7 +260,7 @@ HWY_INLINE bool step_impl(CandidateBuffer& b, const float* x, const float* nref,
       hn::StoreU(em, d, e_out + j);
     }
   }
-  const float emin = kReuse ? hn::GetLane(hn::MinOfLanes(d, vmin)) : store_e_and_d<true>(b, x, t2);
+  const float emin = kReuse ? min_lane(d, vmin) : store_e_and_d<true>(b, x, t2);
   if (!(emin < std::numeric_limits<float>::infinity())) return false;
   LaneSums a{zero, zero, zero, zero, zero, zero, zero, zero};
   const V emv = hn::Set(d, emin);
