@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "../../filter/src/kernel_fit.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -40,7 +41,8 @@ std::vector<FitSample> samples(std::size_t n, std::uint32_t seed, Place&& place,
   std::normal_distribution<double> g(0.0, sigma);
   std::vector<FitSample> out;
   while (out.size() < n) {
-    const Eigen::Vector3d p = place(u(rng), u(rng), g(rng));
+    const Eigen::Vector3d r = test::draw_point(rng, u, u, g);
+    const Eigen::Vector3d p = place(r.x(), r.y(), r.z());
     add_within_h(p, out);
   }
   return out;
@@ -214,7 +216,8 @@ TEST(PlaneRefitTest, TheCreaseSplitLeavesASurfaceBentWithinHAlone) {
   std::normal_distribution<double> g(0.0, kNoise);
   std::vector<FitSample> nb;
   while (nb.size() < 1500) {
-    const Eigen::Vector2d dir(u(rng), u(rng));  // in the xz section
+    const double dz = u(rng), dx = u(rng);  // in the xz section; order as test::draw_point
+    const Eigen::Vector2d dir(dx, dz);
     const double y = u(rng);
     if (!(dir.squaredNorm() > 1e-6 && dir.squaredNorm() < 1)) continue;
     const Eigen::Vector2d xz = (kR + g(rng)) * dir.normalized();

@@ -127,7 +127,7 @@ TEST(ProjectionTest, OffSurfaceDecisionsMatchTheTestOverEveryKernelInReach) {
   // kernels beyond the steps' reach, some not at all.
   std::mt19937 rng(43);  // seed 43
   std::uniform_real_distribution<double> u(-0.04, 0.04), z(0.0, 0.006);
-  for (int k = 0; k < 300; ++k) c.positions.emplace_back(u(rng), u(rng), z(rng));
+  for (int k = 0; k < 300; ++k) c.positions.push_back(test::draw_point(rng, u, u, z));
   const FilterOptions o;
   const Kernelled kd = build(c, h, o);
   const PointSet& d = kd.d;

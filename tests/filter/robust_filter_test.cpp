@@ -387,7 +387,7 @@ TEST(RobustFilterTest, VolumetricClutterIsRemovedByTheSupportDensityTest) {
   std::mt19937 rng(42);  // seed 42
   std::uniform_real_distribution<double> u(-0.5, 0.5), z(-0.15, 0.15);
   while (c.size() < inliers + 2000) {
-    const Eigen::Vector3d p(u(rng), u(rng), z(rng));
+    const Eigen::Vector3d p = test::draw_point(rng, u, u, z);
     if (std::abs(p.z()) > 0.05) c.positions.push_back(p);
   }
   auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };

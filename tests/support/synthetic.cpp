@@ -28,10 +28,10 @@ PointCloud noisy_sphere(std::size_t n, double radius, double sigma, std::uint32_
   c.positions.reserve(n);
   c.normals.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    Eigen::Vector3d d(g(rng), g(rng), g(rng));
+    Eigen::Vector3d d = draw_point(rng, g, g, g);
     d.normalize();
     Eigen::Vector3d p = radius * d;
-    if (sigma > 0) p += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    if (sigma > 0) p += draw_point(rng, noise, noise, noise);
     c.positions.push_back(p);
     c.normals.push_back(d.cast<float>());
   }
@@ -46,9 +46,9 @@ std::vector<std::size_t> add_uniform_outliers(PointCloud& cloud, std::size_t cou
   std::vector<std::size_t> added;
   for (std::size_t k = 0; k < count; ++k) {
     added.push_back(cloud.positions.size());
-    cloud.positions.emplace_back(u(rng), u(rng), u(rng));
+    cloud.positions.push_back(draw_point(rng, u, u, u));
     if (!cloud.normals.empty()) {
-      Eigen::Vector3f n(g(rng), g(rng), g(rng));
+      const Eigen::Vector3f n = draw_point(rng, g, g, g).cast<float>();
       cloud.normals.push_back(n.normalized());
     }
     if (!cloud.confidences.empty()) cloud.confidences.push_back(1.0f);
@@ -64,7 +64,7 @@ std::vector<std::size_t> add_shell_outliers(PointCloud& cloud, std::size_t count
   std::vector<std::size_t> added;
   for (std::size_t k = 0; k < count; ++k) {
     added.push_back(cloud.positions.size());
-    const Eigen::Vector3d d = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+    const Eigen::Vector3d d = draw_point(rng, g, g, g).normalized();
     cloud.positions.push_back(d * (radius + (k % 2 ? 1 : -1) * gap(rng)));
   }
   return added;
