@@ -432,8 +432,10 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
 void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::uint32_t* slots,
                    std::size_t n, const float* origin, float slab2) {
   const hn::Full256<float> d8;
-  const hn::Full256<std::uint32_t> du;
+  const hn::Full256<std::uint32_t> du8;
   using V8 = hn::Vec<decltype(d8)>;
+  const V8 org[3] = {hn::Set(d8, origin[0]), hn::Set(d8, origin[1]), hn::Set(d8, origin[2])};
+  const V8 vslab2 = hn::Set(d8, slab2);
   std::size_t k = 0;
   for (; k + 8 <= n; k += 8) {
     const std::size_t j = b.count;
@@ -449,16 +451,16 @@ void AppendRecords(CandidateBuffer& b, const KernelRecord* records, const std::u
       }
       auto put = [&](std::size_t field, V8 v) { hn::StoreU(v, d8, b.f[field].data() + j); };
       if (half == 0) {
-        for (std::size_t f = 0; f < 3; ++f) put(B::kCx + f, hn::Sub(c[f], hn::Set(d8, origin[f])));
+        for (std::size_t f = 0; f < 3; ++f) put(B::kCx + f, hn::Sub(c[f], org[f]));
         for (std::size_t f = 3; f < 8; ++f) put(f, c[f]);  // Q00 Q11 Q22 Q01 Q02
       } else {
         for (std::size_t f = 0; f < 4; ++f) put(B::kQ12 + f, c[f]);  // Q12 and the normal
-        put(B::kSlab2, hn::Mul(c[4], hn::Set(d8, slab2)));           // record field 12: h^2
+        put(B::kSlab2, hn::Mul(c[4], vslab2));                       // record field 12: h^2
         put(B::kH2, c[4]);
         put(B::kW, c[5]);  // record field 13
       }
     }
-    hn::StoreU(hn::LoadU(du, slots + k), du, b.slot.data() + j);
+    hn::StoreU(hn::LoadU(du8, slots + k), du8, b.slot.data() + j);
     b.count += 8;
   }
   for (; k < n; ++k) b.push_record(slots[k], records[slots[k]], origin, slab2);
