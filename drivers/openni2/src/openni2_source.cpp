@@ -24,6 +24,7 @@
 
 #include <tbb/concurrent_queue.h>
 
+#include "oni_header.h"
 #include "scanclean/core/errors.h"
 
 namespace scanclean {
@@ -275,8 +276,19 @@ void OpenNI2Source::open_device(bool start) {
   if (rc != openni::STATUS_OK) {
     const std::string e = extended_error();
     context_.reset();
-    if (kind_ == "oni")
+    if (kind_ == "oni") {
+      // OpenNI2 says nothing about why; name the one known cause it cannot tell apart.
+      const auto header = oni::read_header(file);
+      if (header && header->max_node_id == 0)
+        throw InputError(
+            file, "header (byte 20)",
+            "the stream count is 0, so OpenNI2 cannot play the frames the file holds; the "
+            "recorder that wrote it was killed before it stopped, and had written its header "
+            "before counting its stream (an openni::Recorder race; scanclean's own recordings "
+            "are patched against it). To play a copy: printf '\\001' | dd of=COPY.oni bs=1 "
+            "seek=20 conv=notrunc");
       throw InputError(file, "open", "OpenNI2 cannot play this recording (" + e + ")");
+    }
     if (kind_ == "vsensor") {
       if (e.find("vsensor:") != std::string::npos && !file.empty())
         throw InputError(file, "recording", e);
@@ -609,6 +621,7 @@ class OniRecordingSource final : public RangeSource {
       throw UnavailableError("record_oni: cannot attach the depth stream: " + extended_error());
     if (recorder_->start() != openni::STATUS_OK)
       throw IoError(out_.string() + ": cannot start recording: " + extended_error());
+    complete_header();
     // Recorder::start() only posts a message to the recorder thread: give it time before frames
     // arrive, or the first frames are dropped (docs/SENSORS.md §3).
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -633,6 +646,25 @@ class OniRecordingSource final : public RangeSource {
   std::string last_error() const override { return source_ ? source_->last_error() : ""; }
 
  private:
+  //! openni::Recorder writes the file header (with the number of attached streams) on its own
+  //! thread, from a message create() posts, and rewrites it only when it stops. When that thread
+  //! runs before attach() has counted the depth stream, the header says 0 streams until the
+  //! recorder stops, and a recording whose process is killed is unplayable. Once the recorder has
+  //! written past its header (the attach record), raise the count in place.
+  void complete_header() {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    std::error_code ec;
+    while (std::filesystem::file_size(out_, ec) <= oni::kHeaderSize || ec) {
+      if (std::chrono::steady_clock::now() > deadline)
+        throw IoError(out_.string() +
+                      ": openni::Recorder wrote no stream record within 10 s of starting");
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    if (!oni::ensure_max_node_id(out_, 1))
+      throw IoError(out_.string() +
+                    ": cannot write the stream count into the .oni header (byte 20)");
+  }
+
   std::string uri_;
   std::filesystem::path out_;
   std::unique_ptr<OpenNI2Source> source_;
