@@ -11,6 +11,7 @@
 #include "scanclean/core/errors.h"
 #include "scanclean/io/triangle_mesh_io.h"
 #include "support/data_paths.h"
+#include "support/synthetic.h"
 
 namespace scanclean {
 namespace {
@@ -73,8 +74,8 @@ TEST(MeshDistanceTest, ClosestPointOnTriangleMatchesOracleInEveryRegion) {
   std::mt19937 rng(1);  // seed 1
   std::uniform_real_distribution<double> u(-2, 2);
   for (int i = 0; i < 20000; ++i) {
-    const Eigen::Vector3d a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng)),
-        c(u(rng), u(rng), u(rng)), p(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d a = test::draw_point(rng, u, u, u), b = test::draw_point(rng, u, u, u),
+                          c = test::draw_point(rng, u, u, u), p = test::draw_point(rng, u, u, u);
     const Eigen::Vector3d q = closest_point_on_triangle(p, a, b, c);
     ASSERT_NEAR((q - p).norm(), oracle_distance(p, a, b, c), 1e-9) << i;
   }
@@ -90,7 +91,7 @@ TEST(MeshDistanceTest, MatchesBruteForceOnRandomPoints) {
   std::mt19937 rng(3);  // seed 3
   std::uniform_real_distribution<double> u(-1.6, 1.6);
   for (int i = 0; i < 3000; ++i) {
-    const Eigen::Vector3d p(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d p = test::draw_point(rng, u, u, u);
     const MeshDistance::Hit h = md.query(p);
     ASSERT_NEAR(h.distance, brute_force(m, p), 1e-12) << i;
     EXPECT_NEAR((h.point - p).norm(), h.distance, 1e-12);
@@ -141,8 +142,8 @@ TEST(MeshDistanceTest, BunnyQueriesMatchBruteForce) {
   std::normal_distribution<double> noise(0.0, 0.002);
   std::uniform_int_distribution<std::size_t> pick(0, m.vertices.size() - 1);
   for (int i = 0; i < 200; ++i) {
-    const Eigen::Vector3d p =
-        m.vertices[pick(rng)] + Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    const Eigen::Vector3d n = test::draw_point(rng, noise, noise, noise);
+    const Eigen::Vector3d p = m.vertices[pick(rng)] + n;
     ASSERT_NEAR(md.distance(p), brute_force(m, p), 1e-12) << "query " << i;
   }
 }

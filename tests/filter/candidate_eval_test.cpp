@@ -16,6 +16,7 @@
 
 #include "padded_points.h"
 #include "simd_targets.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -28,12 +29,14 @@ std::vector<KernelRecord> random_kernels(int n, std::uint32_t seed) {
   std::vector<KernelRecord> k(n);
   const double h = 0.01;
   for (int j = 0; j < n; ++j) {
-    const Eigen::Vector3d c = 0.6 * h * Eigen::Vector3d(g(rng), g(rng), 0.3 * g(rng));
-    const Eigen::Matrix3d rot =
-        Eigen::Quaterniond(u(rng), 0.3 * g(rng), 0.3 * g(rng), 0.3 * g(rng)).normalized().matrix();
-    const Eigen::Vector3d lambda(std::pow(0.05 * h * (1 + u(rng)), 2),
-                                 std::pow(0.4 * h * (1 + u(rng)), 2),
-                                 std::pow(0.5 * h * (1 + u(rng)), 2));
+    // Each value's draws last to first, as gcc made them in one argument list (test::draw_point).
+    const double cz = 0.3 * g(rng), cy = g(rng), cx = g(rng);
+    const Eigen::Vector3d c = 0.6 * h * Eigen::Vector3d(cx, cy, cz);
+    const double qz = 0.3 * g(rng), qy = 0.3 * g(rng), qx = 0.3 * g(rng), qw = u(rng);
+    const Eigen::Matrix3d rot = Eigen::Quaterniond(qw, qx, qy, qz).normalized().matrix();
+    const double l2 = std::pow(0.5 * h * (1 + u(rng)), 2), l1 = std::pow(0.4 * h * (1 + u(rng)), 2),
+                 l0 = std::pow(0.05 * h * (1 + u(rng)), 2);
+    const Eigen::Vector3d lambda(l0, l1, l2);
     const Eigen::Matrix3d s_inv = rot * lambda.cwiseInverse().asDiagonal() * rot.transpose();
     const Eigen::Vector3f n = rot.col(0).cast<float>();
     k[j].set(c, s_inv, n, h * h, static_cast<float>(0.2 + u(rng)), std::sqrt(lambda.maxCoeff()));
@@ -306,7 +309,7 @@ TEST(CandidateEvalTest, KernelsBeyondTheirReachAddNothing) {
       reached.finish();
       const float nref[3] = {0, 0, 1};
       for (int p = 0; p < 10; ++p) {
-        Eigen::Vector3f d(u(rng), u(rng), u(rng));
+        Eigen::Vector3f d = test::draw_point(rng, u, u, u).cast<float>();
         d *= 0.999f * margin / std::max(d.norm(), 1e-6f) * std::abs(u(rng));
         const float xf[3] = {d.x(), d.y(), d.z()};
         StepSums a, b;

@@ -10,6 +10,7 @@
 #include <random>
 
 #include "../../filter/src/parallel.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -27,10 +28,10 @@ Case random_case(int n, std::uint32_t seed) {
   std::uniform_int_distribution<int> pick(0, 19);
   Case c;
   std::vector<Eigen::Vector3d> centres(n / 6 + 1);
-  for (auto& p : centres) p = Eigen::Vector3d(g(rng), g(rng), g(rng)) * 0.01;
+  for (auto& p : centres) p = test::draw_point(rng, g, g, g) * 0.01;
   for (int i = 0; i < n; ++i) {
     c.x.push_back(centres[static_cast<std::size_t>(i) % centres.size()] +
-                  Eigen::Vector3d(g(rng), g(rng), g(rng)) * 0.0004);
+                  test::draw_point(rng, g, g, g) * 0.0004);
     const int k = pick(rng);
     c.pr.L.push_back(k == 0 ? 0.0f : static_cast<float>(k % 7));  // many ties
     c.pr.iterations.push_back(3);
@@ -114,7 +115,7 @@ TEST(ClusteringTest, MatchesTheBruteForceOnASurfaceSpanningManyCells) {
   std::mt19937 rng(78);
   std::normal_distribution<double> g(0.0, 1.0);
   for (auto& p : c.x) {
-    const Eigen::Vector3d d(g(rng), g(rng), g(rng));
+    const Eigen::Vector3d d = test::draw_point(rng, g, g, g);
     p = d.normalized();
   }
   const double eps = 0.04;  // about 1.4 x the mean spacing (0.046 for 6,000 points)

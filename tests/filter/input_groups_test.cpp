@@ -43,7 +43,8 @@ TEST(InputGroupsTest, CoincidentGroupsMatchAMapOfPositions) {
     if (i > 0 && i % 7 == 0) {
       c.positions.push_back(c.positions[rng() % c.positions.size()]);
     } else {
-      Eigen::Vector3d p(u(rng), u(rng), i % 11 == 0 ? 0.0 : u(rng));
+      const double z = i % 11 == 0 ? 0.0 : u(rng), y = u(rng), x = u(rng);  // gcc's order
+      const Eigen::Vector3d p(x, y, z);
       c.positions.push_back(p);
     }
     if (i % 13 == 0) c.positions.push_back({c.positions.back().x(), c.positions.back().y(), -0.0});

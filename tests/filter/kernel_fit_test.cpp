@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "simd_targets.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -40,7 +41,8 @@ std::vector<FitSample> plane_samples(int n, double h, double noise, std::uint32_
   const Eigen::Vector3d t1 = nrm.unitOrthogonal(), t2 = nrm.cross(t1);
   std::vector<FitSample> s;
   while (static_cast<int>(s.size()) < n) {
-    const Eigen::Vector3d p = 0.9 * h * (u(rng) * t1 + u(rng) * t2) + noise * u(rng) * nrm;
+    const double along_n = u(rng), along_t2 = u(rng), along_t1 = u(rng);  // gcc's order
+    const Eigen::Vector3d p = 0.9 * h * (along_t1 * t1 + along_t2 * t2) + noise * along_n * nrm;
     const double r2 = p.squaredNorm();
     if (!(r2 < h * h)) continue;
     double t = 1 - r2 / (h * h);
@@ -187,10 +189,12 @@ TEST(KernelFitTest, SmallestEigenpairMatchesTheIterativeSolver) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   int solved = 0, left = 0;
   for (int trial = 0; trial < 2000; ++trial) {
-    const Eigen::Matrix3d rot =
-        Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
+    // Draws in one argument list, written out last to first: gcc's order (test::draw_point).
+    const double qz = u(rng), qy = u(rng), qx = u(rng), qw = u(rng);
+    const Eigen::Matrix3d rot = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
     const double l1 = trial % 2 == 0 ? 1e-4 * (1 + u(rng)) : 0.05 * (1.5 + u(rng));
-    const Eigen::Vector3d ev(l1, 0.1 + 0.05 * u(rng), 0.15 + 0.05 * u(rng));
+    const double l3 = 0.15 + 0.05 * u(rng), l2 = 0.1 + 0.05 * u(rng);
+    const Eigen::Vector3d ev(l1, l2, l3);
     const Eigen::Matrix3d c = rot * ev.asDiagonal() * rot.transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(c);
     const double gap = ref.eigenvalues()[1] - ref.eigenvalues()[0];
@@ -246,8 +250,7 @@ TEST(KernelFitTest, VectorSamplesEqualTheScalarLoopBitForBit) {
   for (const double half_side : {0.025, 0.01}) {
     SCOPED_TRACE(half_side);
     std::vector<Eigen::Vector3d> p;
-    for (int k = 0; k < 300; ++k)
-      p.push_back(centre + half_side * Eigen::Vector3d(u(rng), u(rng), u(rng)));
+    for (int k = 0; k < 300; ++k) p.push_back(centre + half_side * test::draw_point(rng, u, u, u));
     test::for_each_simd_target([&] {
       for (const std::size_t m : {0, 1, 4, 7, 8, 9, 64, 299}) {
         std::vector<std::uint32_t> js(m);
@@ -296,14 +299,13 @@ TEST(KernelFitTest, GatheringFromAnIndexSpanEqualsTheVisitor) {
   const double h = 0.02;
   PointSet d;
   d.p.push_back(Eigen::Vector3d(3.5, -1.25, 0.75));
-  for (int k = 1; k < 700; ++k)
-    d.p.push_back(d.p[0] + 0.025 * Eigen::Vector3d(u(rng), u(rng), u(rng)));
+  for (int k = 1; k < 700; ++k) d.p.push_back(d.p[0] + 0.025 * test::draw_point(rng, u, u, u));
   std::vector<std::uint32_t> js;
   for (std::uint32_t k = 0; k < 700; ++k) js.push_back((k * 211) % 700);
   auto normals = [&](bool own) {
     std::vector<Eigen::Vector3f> v(d.p.size(), Eigen::Vector3f::Zero());
     for (std::size_t k = 1; k < v.size(); k += 2)
-      v[k] = Eigen::Vector3f(u(rng), u(rng), u(rng)).normalized();
+      v[k] = test::draw_point(rng, u, u, u).cast<float>().normalized();
     if (own) v[0] = Eigen::Vector3f(0, 0, 1);
     return v;
   };

@@ -4,6 +4,7 @@
 // factor floor(8 / kDenserBy).
 
 #include "../../filter/src/kernel_sites.h"
+#include "support/synthetic.h"
 
 #include <gtest/gtest.h>
 
@@ -20,14 +21,18 @@ std::vector<Eigen::Vector3f> plane(double per_m2, double dense_per_m2, std::uint
   std::vector<Eigen::Vector3f> p;
   const auto n = static_cast<std::size_t>(per_m2 * 0.5);
   for (std::size_t k = 0; k < n; ++k) {
-    const Eigen::Vector3f q(ux(rng), uy(rng), 0.0f);
+    const float y = uy(rng), x = ux(rng);  // gcc's order (test::draw_point)
+    const Eigen::Vector3f q(x, y, 0.0f);
     if (dense_per_m2 > 0 && q.x() > 0.1f && q.x() < 0.3f && q.y() > 0.1f && q.y() < 0.3f)
       continue;  // the patch gets its own density below
     p.push_back(q);
   }
   if (dense_per_m2 > 0) {
     const auto m = static_cast<std::size_t>(dense_per_m2 * 0.04);
-    for (std::size_t k = 0; k < m; ++k) p.emplace_back(ud(rng), ud(rng), 0.0f);
+    for (std::size_t k = 0; k < m; ++k) {
+      const float y = ud(rng), x = ud(rng);
+      p.emplace_back(x, y, 0.0f);
+    }
   }
   return p;
 }

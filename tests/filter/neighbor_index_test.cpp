@@ -1,4 +1,5 @@
 #include "../../filter/src/neighbor_index.h"
+#include "support/synthetic.h"
 
 #include <gtest/gtest.h>
 
@@ -16,9 +17,14 @@ std::vector<Eigen::Vector3f> mixed_points(std::uint32_t seed) {
   std::normal_distribution<float> g(0.0f, 0.05f);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   std::vector<Eigen::Vector3f> p;
-  for (int i = 0; i < 2000; ++i) p.emplace_back(g(rng), g(rng), g(rng));
-  for (int i = 0; i < 2000; ++i) p.emplace_back(u(rng), u(rng), 0.3f + 0.01f * g(rng));
-  for (int i = 0; i < 200; ++i) p.emplace_back(5 * u(rng), 5 * u(rng), 5 * u(rng));
+  // Several draws in one argument list, written out last to first: gcc's order
+  // (test::draw_point).
+  for (int i = 0; i < 2000; ++i) p.push_back(test::draw_point(rng, g, g, g).cast<float>());
+  for (int i = 0; i < 2000; ++i) {
+    const float z = 0.3f + 0.01f * g(rng), y = u(rng), x = u(rng);
+    p.emplace_back(x, y, z);
+  }
+  for (int i = 0; i < 200; ++i) p.push_back(5.0f * test::draw_point(rng, u, u, u).cast<float>());
   p.push_back(p[10]);  // an exact duplicate
   return p;
 }
@@ -66,7 +72,10 @@ TEST(NeighborIndexTest, CellsAreContiguousWithTheirPointsInIndexOrder) {
   std::mt19937 rng(13);  // seed 13
   std::uniform_real_distribution<float> u(-5.0f, 5.0f);
   std::vector<Eigen::Vector3f> pts;
-  for (int i = 0; i < 6000; ++i) pts.emplace_back(u(rng), u(rng), 0.001f * u(rng));
+  for (int i = 0; i < 6000; ++i) {
+    const float z = 0.001f * u(rng), y = u(rng), x = u(rng);  // gcc's order (test::draw_point)
+    pts.emplace_back(x, y, z);
+  }
   for (int i = 0; i < 300; ++i) pts.push_back(pts[static_cast<std::size_t>(i) * 7]);  // duplicates
   for (double cell : {0.001, 0.3}) {
     NeighborIndex index(pts, cell);
@@ -116,7 +125,7 @@ TEST(NeighborIndexTest, RoughKthDistanceMatchesBruteForce) {
   std::normal_distribution<float> g(0.0f, 0.01f);
   for (const std::size_t n : {std::size_t{30000}, std::size_t{200000}}) {
     std::vector<Eigen::Vector3f> p(n);
-    for (auto& x : p) x = Eigen::Vector3f(u(rng), u(rng), g(rng));
+    for (auto& x : p) x = test::draw_point(rng, u, u, g).cast<float>();
     const std::size_t kk = 9, samples = 301;
     const std::size_t step = std::clamp<std::size_t>(n / (8 * kk), 1, 16);
     const std::size_t ks = std::max<std::size_t>(2, (kk + step / 2) / step);
@@ -154,7 +163,10 @@ TEST(NeighborIndexTest, AdjacentCountsAndTheirRanksOverThePoints) {
   std::mt19937 rng(23);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   std::vector<Eigen::Vector3f> p;
-  for (int k = 0; k < 4000; ++k) p.emplace_back(u(rng), u(rng) * u(rng), 0.1f * u(rng));
+  for (int k = 0; k < 4000; ++k) {
+    const float z = 0.1f * u(rng), y = u(rng) * u(rng), x = u(rng);  // gcc's order
+    p.emplace_back(x, y, z);
+  }
   const NeighborIndex index(p, 0.05);
   const std::vector<std::uint32_t> counts = index.adjacent_counts();
   ASSERT_EQ(counts.size(), index.cell_count());

@@ -10,6 +10,7 @@
 #include <random>
 
 #include "../../filter/src/kernel_fit.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -44,7 +45,8 @@ TEST(OffSurfaceTest, DowndateEqualsAFullRefitWithoutThePoints) {
     std::vector<Eigen::Vector3d> p(n);
     std::vector<double> t(n);
     for (int k = 0; k < n; ++k) {
-      p[k] = Eigen::Vector3d(g(rng), g(rng), 0.1 * g(rng)) * 1e-3;
+      const double z = 0.1 * g(rng), y = g(rng), x = g(rng);  // gcc's order (test::draw_point)
+      p[k] = Eigen::Vector3d(x, y, z) * 1e-3;
       t[k] = u(rng);
     }
     std::vector<bool> skip(n, false);
@@ -71,12 +73,14 @@ TEST(OffSurfaceTest, FlooredMahalanobisEqualsTheEigenDecomposition) {
   const double floor2 = 0.05 * 0.05;
   int floored = 0;
   for (int trial = 0; trial < 400; ++trial) {
-    const Eigen::Matrix3d rot =
-        Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
+    // Draws in one argument list, written out last to first: gcc's order (test::draw_point).
+    const double qz = u(rng), qy = u(rng), qx = u(rng), qw = u(rng);
+    const Eigen::Matrix3d rot = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
     const double l0 = trial % 2 == 0 ? 0.01 * (1.5 + u(rng)) : 1e-3 * (1.5 + u(rng));
-    const Eigen::Vector3d ev(l0, 0.08 + 0.02 * u(rng), 0.12 + 0.02 * u(rng));
+    const double l2 = 0.12 + 0.02 * u(rng), l1 = 0.08 + 0.02 * u(rng);
+    const Eigen::Vector3d ev(l0, l1, l2);
     const Eigen::Matrix3d c = rot * ev.asDiagonal() * rot.transpose();
-    const Eigen::Vector3d y(u(rng), u(rng), u(rng));
+    const Eigen::Vector3d y = test::draw_point(rng, u, u, u);
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ref(c);
     const Eigen::Vector3d yl = ref.eigenvectors().transpose() * y;
     double want = 0;

@@ -2,6 +2,7 @@
 // forest against Prim's algorithm, and the oriented normals of spheres against their radii.
 
 #include "../../filter/src/orientation.h"
+#include "support/synthetic.h"
 
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
@@ -96,7 +97,7 @@ std::vector<Eigen::Vector3f> sphere(std::size_t n, const Eigen::Vector3f& c, flo
   std::normal_distribution<float> g(0.0f, 1.0f);
   std::vector<Eigen::Vector3f> p;
   for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3f d = Eigen::Vector3f(g(rng), g(rng), g(rng)).normalized();
+    const Eigen::Vector3f d = test::draw_point(rng, g, g, g).cast<float>().normalized();
     p.push_back(c + (r + sigma * g(rng)) * d);
   }
   return p;
@@ -131,7 +132,7 @@ TEST(OrientationTest, OpenSheetFacesUpAndFewPointsStillGetNormals) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   std::normal_distribution<float> g(0.0f, 0.002f);
   std::vector<Eigen::Vector3f> p;
-  for (int i = 0; i < 4000; ++i) p.emplace_back(u(rng), u(rng), g(rng));
+  for (int i = 0; i < 4000; ++i) p.push_back(test::draw_point(rng, u, u, g).cast<float>());
   const OrientedPointNormals on = orient_normals(p, 24, FilterOptions{});
   for (const Eigen::Vector3f& n : on.normals) EXPECT_GT(n.z(), 0.9f);
   // Fewer points than k + 1: every point's PCA takes them all.

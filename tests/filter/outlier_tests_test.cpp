@@ -12,6 +12,7 @@
 
 #include "../../filter/src/neighbor_index.h"
 #include "../../filter/src/parallel.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -44,10 +45,27 @@ Scene make_scene(std::uint32_t seed, double h) {
     s.cl.rep_of.push_back(i);
     s.input_index.push_back(i);
   };
-  for (int k = 0; k < 900; ++k) add(Eigen::Vector3d(u(rng), u(rng), 0.01 * u(rng)) * 5 * h, l(rng));
-  for (int k = 0; k < 60; ++k) add(Eigen::Vector3d(6 + u(rng), u(rng), 0) * 5 * h, l(rng));
-  for (int k = 0; k < 20; ++k) add(Eigen::Vector3d(u(rng), u(rng), 0.01) * 5 * h, 0.05f * l(rng));
-  for (int k = 0; k < 5; ++k) add(Eigen::Vector3d(20 + 0.1 * u(rng), 0, 0) * 5 * h, l(rng));
+  // Each point's draws last to first (its weight, then z, y, x): the order gcc took them in as
+  // one argument list (test::draw_point).
+  for (int k = 0; k < 900; ++k) {
+    const float w = l(rng);
+    const double z = 0.01 * u(rng), y = u(rng), x = u(rng);
+    add(Eigen::Vector3d(x, y, z) * 5 * h, w);
+  }
+  for (int k = 0; k < 60; ++k) {
+    const float w = l(rng);
+    const double y = u(rng), x = 6 + u(rng);
+    add(Eigen::Vector3d(x, y, 0) * 5 * h, w);
+  }
+  for (int k = 0; k < 20; ++k) {
+    const float w = 0.05f * l(rng);
+    const double y = u(rng), x = u(rng);
+    add(Eigen::Vector3d(x, y, 0.01) * 5 * h, w);
+  }
+  for (int k = 0; k < 5; ++k) {
+    const float w = l(rng);
+    add(Eigen::Vector3d(20 + 0.1 * u(rng), 0, 0) * 5 * h, w);
+  }
   s.d.h = h;
   s.d.p = s.x;
   return s;

@@ -315,8 +315,10 @@ TEST(RobustFilterTest, OutliersCloserThanHAreRemoved) {
   const double h_guess = robust_filter(c, base).stats.h;
   std::mt19937 rng(33);  // seed 33
   std::uniform_real_distribution<double> u(-0.4, 0.4), off(0.3, 0.9);
-  for (int k = 0; k < 200; ++k)
-    c.positions.emplace_back(u(rng), u(rng), (k % 2 ? 1 : -1) * off(rng) * h_guess);
+  for (int k = 0; k < 200; ++k) {
+    const double z = (k % 2 ? 1 : -1) * off(rng) * h_guess, y = u(rng), x = u(rng);  // gcc's order
+    c.positions.emplace_back(x, y, z);
+  }
   auto removed = [&](const FilterResult& r) { return injected_removed(r, inliers, c.size()); };
   auto inliers_kept = [&](const FilterResult& r) { return kept_below(r, inliers); };
   // Each test alone, the density tests (tau, which also see these sparse points) off.
@@ -776,8 +778,14 @@ TEST(RobustFilterTest, AdaptiveKernelsHandleTenfoldDensityChange) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   std::normal_distribution<double> g(0.0, 1.0);
   PointCloud c;
-  for (int i = 0; i < 20000; ++i) c.positions.emplace_back(-u(rng), u(rng), 0.002 * g(rng));
-  for (int i = 0; i < 2000; ++i) c.positions.emplace_back(u(rng), u(rng), 0.006 * g(rng));
+  for (int i = 0; i < 20000; ++i) {
+    const double z = 0.002 * g(rng), y = u(rng), x = -u(rng);  // gcc's order (test::draw_point)
+    c.positions.emplace_back(x, y, z);
+  }
+  for (int i = 0; i < 2000; ++i) {
+    const double z = 0.006 * g(rng), y = u(rng), x = u(rng);
+    c.positions.emplace_back(x, y, z);
+  }
   FilterOptions o = no_merge();
   o.scale = ScaleMode::kAdaptive;
   const FilterResult r = robust_filter(c, o);
@@ -957,7 +965,10 @@ TEST(RobustFilterTest, SmallComponentsAreRemovedOnRequest) {
   // a component smaller than the requested 30 points.
   std::mt19937 rng(20);  // seed 20
   std::normal_distribution<double> g(0.0, 0.002);
-  for (int i = 0; i < 20; ++i) c.positions.emplace_back(g(rng), g(rng), 0.4 + 0.0001 * g(rng));
+  for (int i = 0; i < 20; ++i) {
+    const double z = 0.4 + 0.0001 * g(rng), y = g(rng), x = g(rng);  // gcc's order
+    c.positions.emplace_back(x, y, z);
+  }
   FilterOptions o = no_merge();
   const FilterResult keep = robust_filter(c, o);
   std::size_t clump_kept = 0;

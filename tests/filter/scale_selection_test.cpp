@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "../../filter/src/neighbor_index.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -30,7 +31,10 @@ void add_sheet(Cloud& c, std::size_t n, double z, double sigma, std::uint32_t se
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(-0.5, 0.5);
   std::normal_distribution<double> g(0.0, sigma);
-  for (std::size_t i = 0; i < n; ++i) c.p.emplace_back(u(rng), u(rng), z + g(rng));
+  for (std::size_t i = 0; i < n; ++i) {
+    const double pz = z + g(rng), py = u(rng), px = u(rng);  // gcc's order (test::draw_point)
+    c.p.emplace_back(px, py, pz);
+  }
 }
 
 ScaleSelectionOptions ladder(double h, double sigma) {
@@ -190,9 +194,9 @@ TEST(ScaleSelectionTest, RegionScalesAreTheMedianRadiusOfTheSamplesNearestToEach
   std::uniform_real_distribution<float> u(-1.0f, 1.0f), r(0.01f, 0.05f);
   std::vector<Eigen::Vector3f> points(800), samples(60);
   std::vector<double> radii(samples.size());
-  for (auto& p : points) p = Eigen::Vector3f(u(rng), u(rng), u(rng));
+  for (auto& p : points) p = test::draw_point(rng, u, u, u).cast<float>();
   for (std::size_t j = 0; j < samples.size(); ++j) {
-    samples[j] = Eigen::Vector3f(u(rng), u(rng), u(rng));
+    samples[j] = test::draw_point(rng, u, u, u).cast<float>();
     radii[j] = r(rng);
   }
   auto oracle = [&](const Eigen::Vector3f& q, std::size_t k) {

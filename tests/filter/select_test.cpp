@@ -19,6 +19,7 @@
 
 #include "padded_points.h"
 #include "simd_targets.h"
+#include "support/synthetic.h"
 
 namespace scanclean::detail {
 namespace {
@@ -293,7 +294,7 @@ TEST(SelectTest, SelectWithinEqualsTheScalarDistanceTest) {
       std::vector<float> x, y, z;
       std::vector<std::uint32_t> slots;
       for (int j = 0; j < count; ++j) {
-        Eigen::Vector3f v(g(rng), g(rng), g(rng));
+        Eigen::Vector3f v = test::draw_point(rng, g, g, g).cast<float>();
         v *= r * u(rng) / v.norm();
         x.push_back(origin[0] + v.x());
         y.push_back(origin[1] + v.y());

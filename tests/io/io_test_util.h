@@ -12,6 +12,7 @@
 
 #include "scanclean/core/errors.h"
 #include "scanclean/core/point_cloud.h"
+#include "support/synthetic.h"
 
 namespace scanclean::test {
 
@@ -62,8 +63,8 @@ inline PointCloud full_cloud(std::size_t n, std::uint32_t seed) {
   PointCloud c;
   for (std::size_t i = 0; i < n; ++i) {
     // float-representable positions so that the float path is taken
-    c.positions.emplace_back(float(u(rng)), float(u(rng)), float(u(rng)));
-    c.normals.push_back(Eigen::Vector3f(float(u(rng)), float(u(rng)), float(u(rng))).normalized());
+    c.positions.push_back(test::draw_point(rng, u, u, u).cast<float>().cast<double>());
+    c.normals.push_back(test::draw_point(rng, u, u, u).cast<float>().normalized());
     c.confidences.push_back(float(0.5 + 0.5 * u(rng)));
     c.intensities.push_back(float(100 * u(rng)));
     c.colors.push_back({std::uint8_t(rng() & 255), std::uint8_t(rng() & 255),

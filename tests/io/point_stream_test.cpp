@@ -10,6 +10,7 @@
 
 #include "io_test_util.h"
 #include "scanclean/io/point_cloud_io.h"
+#include "support/synthetic.h"
 
 namespace scanclean {
 namespace {
@@ -22,7 +23,7 @@ PointCloud random_cloud(std::size_t n, std::uint32_t seed) {
   std::uniform_int_distribution<int> c(0, 255);
   PointCloud cloud;
   for (std::size_t i = 0; i < n; ++i) {
-    cloud.positions.emplace_back(u(rng), u(rng), u(rng));
+    cloud.positions.push_back(test::draw_point(rng, u, u, u));
     cloud.normals.emplace_back(
         Eigen::Vector3f(static_cast<float>(u(rng)), 1.0f, 0.5f).normalized());
     cloud.confidences.push_back(static_cast<float>(i % 7) / 7.0f);
