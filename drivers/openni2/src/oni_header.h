@@ -1,5 +1,6 @@
 // The fixed header at the start of an OpenNI2 .oni file (OpenNI2 1.0.1.0 format, as written by
-// openni::Recorder): read it to diagnose a file OpenNI2 refuses, and complete it while recording.
+// openni::Recorder): its stream count, read to diagnose a file OpenNI2 refuses, and completed
+// while recording.
 #pragma once
 
 #include <cstdint>
@@ -13,19 +14,11 @@ namespace scanclean::oni {
 inline constexpr std::size_t kHeaderSize = 24;
 inline constexpr std::size_t kMaxNodeIdOffset = 20;
 
-struct Header {
-  std::uint8_t major = 0, minor = 0;
-  std::uint16_t maintenance = 0;
-  std::uint32_t build = 0;
-  std::uint64_t max_timestamp = 0;
-  //! Highest stream (node) id in the file; the player sizes its stream table from it, so a value
-  //! below the ids the file's records use makes the whole file unplayable.
-  std::uint32_t max_node_id = 0;
-};
-
-//! The header of `file`, or nullopt when the file is shorter than a header or does not start with
-//! "NI10" (an OpenNI 1 or foreign file). Never throws.
-std::optional<Header> read_header(const std::filesystem::path& file);
+//! The header's maximum node id: the highest stream id in the file. The player sizes its stream
+//! table from it, so a value below the ids the file's records use makes the whole file
+//! unplayable. nullopt when the file is shorter than a header or does not start with "NI10" (an
+//! OpenNI 1 or foreign file). Never throws.
+std::optional<std::uint32_t> read_max_node_id(const std::filesystem::path& file);
 
 //! Raises the header's maximum node id to at least `streams` in place, without touching anything
 //! else (the recorder may be appending to the file meanwhile). Returns false when the file has no

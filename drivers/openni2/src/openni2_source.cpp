@@ -278,8 +278,7 @@ void OpenNI2Source::open_device(bool start) {
     context_.reset();
     if (kind_ == "oni") {
       // OpenNI2 says nothing about why; name the one known cause it cannot tell apart.
-      const auto header = oni::read_header(file);
-      if (header && header->max_node_id == 0)
+      if (oni::read_max_node_id(file) == 0u)
         throw InputError(
             file, "header (byte 20)",
             "the stream count is 0, so OpenNI2 cannot play the frames the file holds; the "
