@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "fill_later.h"
+#include "huge_pages.h"
 #include "parallel.h"
 #include "radix_sort.h"
 
@@ -20,7 +21,7 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
                         bool oriented) {
   const std::size_t n = x.size();
   Clusters cl;
-  cl.rep_of.assign(n, kNone);
+  assign_huge(cl.rep_of, n, kNone);
   std::vector<std::uint32_t> cand =
       indices_where(n, [&](std::size_t i) { return projected(pr.state[i]); });
   if (!(eps > 0)) {
@@ -95,7 +96,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   // ranks copied into that order. The cell is a dense number, x + nx (y + ny z), so that the
   // cells of one row along x are consecutive in that order. Built in point order (the filter's
   // grid order, so the positions are read in sequence).
-  std::vector<std::uint32_t> rank_of(n, kNone);
+  std::vector<std::uint32_t> rank_of;
+  assign_huge(rank_of, n, kNone);
   parallel_each(nc, [&](std::size_t k) { rank_of[cand[k]] = static_cast<std::uint32_t>(k); });
   std::vector<std::uint32_t> joiners = indices_where(  // point indices, in point order
       n, [&](std::size_t i) { return rank_of[i] != kNone && joins[rank_of[i]] != 0; });
@@ -125,8 +127,10 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     stable_radix_sort(
         by_cell, [](const ByCell& e) { return e.cell; }, scratch);
   }
-  std::vector<Eigen::Vector3d> cell_x(nj);
-  std::vector<Eigen::Vector3f> cell_n(oriented ? nj : 0);
+  std::vector<Eigen::Vector3d> cell_x;
+  std::vector<Eigen::Vector3f> cell_n;
+  resize_huge(cell_x, nj);
+  resize_huge(cell_n, oriented ? nj : 0);
   FillLaterVector<std::uint32_t> cell_rank(nj);
   parallel_each(nj, [&](std::size_t j) {
     const std::uint32_t i = by_cell[j].point;
@@ -219,7 +223,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     for (const Pair& e : v) ++row[e.k + 1];
   });
   for (std::size_t k = 0; k < nc; ++k) row[k + 1] += row[k];
-  std::vector<std::uint32_t> nb(row[nc]);
+  std::vector<std::uint32_t> nb;
+  resize_huge(nb, row[nc]);
   {
     std::vector<std::uint32_t> fill(row.begin(), row.end() - 1);
     found.combine_each([&](const std::vector<Pair>& v) {
@@ -259,13 +264,15 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   const std::vector<std::uint32_t> reps =
       indices_where(nc, [&](std::size_t k) { return role[k] == kRep; });
   const std::size_t R = reps.size();
-  std::vector<std::uint32_t> rep_index(nc, kNone);
-  cl.seed.resize(R);
+  std::vector<std::uint32_t> rep_index;
+  assign_huge(rep_index, nc, kNone);
+  resize_huge(cl.seed, R);
   parallel_each(R, [&](std::size_t r) {
     rep_index[reps[r]] = static_cast<std::uint32_t>(r);
     cl.seed[r] = cand[reps[r]];
   });
-  std::vector<std::uint32_t> joined(nc, kNone);  // per candidate: its representative
+  std::vector<std::uint32_t> joined;
+  assign_huge(joined, nc, kNone);  // per candidate: its representative
   parallel_each(nc, [&](std::size_t k) {
     if (role[k] == kRep) {
       joined[k] = rep_index[k];
@@ -290,7 +297,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
   // others (few: most points stay alone) follow it in rank order.
   const std::vector<std::uint32_t> joiners_k =
       indices_where(nc, [&](std::size_t k) { return role[k] != kRep; });
-  std::vector<std::uint32_t> first(R + 1, 0), members(nc);
+  std::vector<std::uint32_t> first(R + 1, 0), members;
+  resize_huge(members, nc);
   parallel_each(R, [&](std::size_t r) { first[r + 1] = 1; });
   for (const std::uint32_t k : joiners_k) ++first[joined[k] + 1];
   for (std::size_t r = 0; r < R; ++r) first[r + 1] += first[r];
@@ -300,8 +308,8 @@ Clusters cluster_points(const std::vector<Eigen::Vector3d>& x, const Projected& 
     parallel_each(R, [&](std::size_t r) { fill[r] = first[r] + 1; });
     for (const std::uint32_t k : joiners_k) members[fill[joined[k]]++] = k;
   }
-  cl.count.resize(R);
-  cl.position.resize(R);
+  resize_huge(cl.count, R);
+  resize_huge(cl.position, R);
   parallel_each(R, [&](std::size_t r) {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
     double l = 0;

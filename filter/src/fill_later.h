@@ -11,6 +11,8 @@
 #include <utility>
 #include <vector>
 
+#include "huge_pages.h"
+
 namespace scanclean::detail {
 
 template <class T>
@@ -22,6 +24,12 @@ struct FillLaterAllocator : std::allocator<T> {
   FillLaterAllocator() noexcept = default;
   template <class U>
   FillLaterAllocator(const FillLaterAllocator<U>&) noexcept {}  // NOLINT: rebinding
+  //! Large arrays ask for huge pages before their first write (huge_pages.h).
+  T* allocate(std::size_t n) {
+    T* p = std::allocator<T>::allocate(n);
+    advise_huge_pages(p, n * sizeof(T));
+    return p;
+  }
   //! Default-initialises: nothing is written for a trivial U.
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {

@@ -6,6 +6,7 @@
 #include <type_traits>
 
 #include "cell_select.h"
+#include "huge_pages.h"
 #include "kernel_fit.h"
 #include "parallel.h"
 #include "plane_refit.h"
@@ -43,7 +44,7 @@ KernelSet build_kernels(const PointSet& d, std::unique_ptr<NeighborIndex>& point
   std::vector<std::uint8_t> valid(nk, 0);
   FillLaterVector<KernelRecord> records(nk);  // candidate order first
   FillLaterVector<KernelFitRecord> fits(prm.keep_fits ? nk : 0);
-  nref.resize(n);  // Eigen vectors: not initialised, zeroed in parallel
+  resize_huge(nref, n);  // Eigen vectors: not initialised, zeroed in parallel
   parallel_each(n, [&](std::size_t i) { nref[i].setZero(); });
   const double floor2 = o.eigen_floor * o.eigen_floor;
   const bool by_slot = ids == PointIndexIds::kSlots;

@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "fill_later.h"
+#include "huge_pages.h"
 #include "parallel.h"
 #include "radix_sort.h"
 
@@ -132,9 +133,9 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
     detail::stable_radix_sort(
         entries, [](const Entry& e) { return e.morton; }, scratch);
   }
-  pts_.resize(n);
-  ids_.resize(n);
-  inv_.resize(n);
+  detail::resize_huge(pts_, n);
+  detail::resize_huge(ids_, n);
+  detail::resize_huge(inv_, n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t s = r.begin(); s < r.end(); ++s) {
@@ -157,8 +158,8 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
   while (cap < 2 * keys.size()) cap *= 2;
   hash_mask_ = cap - 1;
   hash_bits_ = std::countr_zero(cap);
-  hash_keys_.assign(cap, kEmpty);
-  hash_cells_.assign(cap, 0);
+  detail::assign_huge(hash_keys_, cap, kEmpty);
+  detail::assign_huge<std::uint32_t>(hash_cells_, cap, 0);
   for (std::size_t c = 0; c < keys.size(); ++c) {
     std::uint64_t h = hash_of(keys[c], hash_bits_);
     while (true) {
@@ -199,7 +200,7 @@ void NeighborIndex::build(const std::vector<Eigen::Vector3f>& points,
   adj_begin_.resize(nc + 1);
   adj_begin_[0] = 0;
   for (std::size_t c = 0; c < nc; ++c) adj_begin_[c + 1] = adj_begin_[c] + adj_n[c];
-  adj_.resize(adj_begin_[nc]);
+  detail::resize_huge(adj_, adj_begin_[nc]);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, nc, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t c = r.begin(); c < r.end(); ++c)

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 
+#include "huge_pages.h"
 #include "parallel.h"
 
 namespace scanclean::detail {
@@ -59,9 +60,10 @@ void write_outputs(const OutputInput& in, FilterResult& result) {
     // bytes a point, zeroed side by side.
     const std::size_t nk = kept.size();
     std::vector<double> L, it, fl, mc, si, dn;
-    tbb::parallel_invoke([&] { out.normals.resize(nk); }, [&] { L.resize(nk); },
-                         [&] { it.resize(nk); }, [&] { fl.resize(nk); }, [&] { mc.resize(nk); },
-                         [&] { si.resize(nk); }, [&] { dn.resize(nk); });
+    tbb::parallel_invoke([&] { resize_huge(out.normals, nk); }, [&] { resize_huge(L, nk); },
+                         [&] { resize_huge(it, nk); }, [&] { resize_huge(fl, nk); },
+                         [&] { resize_huge(mc, nk); }, [&] { resize_huge(si, nk); },
+                         [&] { resize_huge(dn, nk); });
     // The representatives and their seeds are scattered over memory: each output point's are
     // fetched a few points ahead (the loads are independent, so they overlap).
     constexpr std::size_t kAhead = 8;

@@ -16,6 +16,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "huge_pages.h"
 #include "radix_sort.h"
 #include "scanclean/filter/filter_options.h"
 
@@ -42,7 +43,9 @@ void parallel_each(std::size_t n, F&& f) {
 //! from[order[k]] for each k, in parallel: values in another order (an index's slot order).
 template <class T>
 std::vector<T> permuted(const std::vector<T>& from, const std::vector<std::uint32_t>& order) {
-  std::vector<T> to(order.size());
+  std::vector<T> to;
+  reserve_huge(to, order.size());
+  to.resize(order.size());
   parallel_each(order.size(), [&](std::size_t k) { to[k] = from[order[k]]; });
   return to;
 }
@@ -121,7 +124,8 @@ std::vector<T> values_where(std::size_t n, Pred&& pred, Value&& value) {
     at[c + 1] = m;
   });
   for (std::size_t c = 0; c < chunks; ++c) at[c + 1] += at[c];
-  std::vector<T> out(at[chunks]);
+  std::vector<T> out;
+  resize_huge(out, at[chunks]);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
     std::size_t m = at[c];
     for (std::size_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i)

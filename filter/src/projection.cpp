@@ -6,6 +6,7 @@
 
 #include "candidate_eval.h"
 #include "cell_select.h"
+#include "huge_pages.h"
 #include "off_surface.h"
 #include "parallel.h"
 
@@ -265,10 +266,10 @@ void project_all(const PointSet& d, const KernelSet& ks, const std::vector<Eigen
   ctx.off_surface.floor2 = o.eigen_floor * o.eigen_floor;
   ctx.off_surface.oriented = oriented;
   const std::size_t n = x.size();
-  out.L.assign(n, 0);
-  out.iterations.assign(n, 0);
-  out.state.assign(n, ProjectionState::kConverged);
-  out.normal.assign(n, Eigen::Vector3f::Zero());
+  assign_huge(out.L, n, 0.0f);
+  assign_huge<std::uint8_t>(out.iterations, n, 0);
+  assign_huge(out.state, n, ProjectionState::kConverged);
+  assign_huge(out.normal, n, Eigen::Vector3f(Eigen::Vector3f::Zero()));
   parallel_each_reporting(n, o, phase, [&](std::size_t i) {
     // Sensor normals are the reference orientation when present, else the own kernel's normal.
     const Eigen::Vector3f ref = d.has_v(i) ? d.v[i] : nref[i];

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "clustering.h"
+#include "huge_pages.h"
 #include "input_groups.h"
 #include "kernel_sites.h"
 #include "kernels.h"
@@ -81,10 +82,10 @@ detail::PointSet input_points(const PointCloud& input, const Eigen::Vector3d& or
                               bool use_w) {
   const std::size_t N = input.size();
   detail::PointSet in;
-  in.p.resize(N);
+  detail::resize_huge(in.p, N);
   parallel_each(N, [&](std::size_t i) { in.p[i] = input.positions[i] - origin; });
   if (use_v) {
-    in.v.resize(N);
+    detail::resize_huge(in.v, N);
     parallel_each(N, [&](std::size_t i) {
       const Eigen::Vector3f v = input.normals[i];
       const float len = v.norm();
@@ -224,7 +225,8 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   detail::report(o, "scale", 0);
   const Eigen::AlignedBox3d box = detail::bounding_box_of(input.positions);
   const Eigen::Vector3d origin = box.center();
-  std::vector<Eigen::Vector3f> pf(N);
+  std::vector<Eigen::Vector3f> pf;
+  detail::resize_huge(pf, N);
   parallel_each(N, [&](std::size_t i) { pf[i] = (input.positions[i] - origin).cast<float>(); });
   detail::PointSet in = input_points(input, origin, use_v, use_w);
   in.v_orients_only = o.normals_orient_only;
@@ -285,7 +287,8 @@ FilterResult run_group(const PointCloud& input, const FilterOptions& o, bool use
   t = Clock::now();
   std::vector<Eigen::Vector3f> nref;
   prm.keep_fits = o.outlier_sigma > 0;
-  std::vector<float> support(o.tau > 0 ? N : 0, -1.0f);
+  std::vector<float> support;
+  detail::assign_huge(support, o.tau > 0 ? N : 0, -1.0f);
   if (!support.empty()) prm.support = &support;
   std::vector<std::uint8_t> sites;  // the tiled filter's kernel sites (kernels.h), grid order
   if (const Attribute* a = input.find_attribute(detail::kKernelSitesAttribute)) {
