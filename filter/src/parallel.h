@@ -44,8 +44,7 @@ void parallel_each(std::size_t n, F&& f) {
 template <class T>
 std::vector<T> permuted(const std::vector<T>& from, const std::vector<std::uint32_t>& order) {
   std::vector<T> to;
-  reserve_huge(to, order.size());
-  to.resize(order.size());
+  resize_huge(to, order.size());
   parallel_each(order.size(), [&](std::size_t k) { to[k] = from[order[k]]; });
   return to;
 }

@@ -9,7 +9,6 @@
 
 #include <cstdint>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -18,7 +17,7 @@
 namespace scanclean::detail {
 namespace {
 
-constexpr std::uintptr_t kHuge = std::uintptr_t{2} << 20;
+constexpr std::uintptr_t kHuge = kHugePageSize;
 
 // The kernel's transparent huge page setting ("always", "madvise" or "never"), or "" when the
 // kernel has none.
