@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <exception>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <numeric>
@@ -386,6 +388,50 @@ std::filesystem::path scratch_file(const TiledOptions& t, std::size_t tile, int 
   return t.scratch / name;
 }
 
+// The checks of robust_filter's input (a finite position, a confidence in [0, 1] where they are
+// the weights), made in the first pass so that the error names the record, before a grid casts
+// a coordinate to a cell and before any tile has reached the sink.
+void check_chunk(const PointCloud& c, const std::vector<std::uint64_t>& rec,
+                 const FilterOptions& o) {
+  const bool weights = o.use_confidences && c.has_confidences();
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    if (!c.positions[i].allFinite())
+      throw InputError("tiled filter input", "record " + std::to_string(rec[i]),
+                       "non-finite coordinate (remove invalid points before filtering)");
+    if (weights && !(c.confidences[i] >= 0.0f && c.confidences[i] <= 1.0f)) {
+      std::ostringstream v;
+      v << c.confidences[i];
+      throw InputError("tiled filter input", "record " + std::to_string(rec[i]),
+                       "confidence " + v.str() + " outside [0, 1]");
+    }
+  }
+}
+
+// Removes this process's scratch files when the run ends by an exception: those it wrote and
+// those of its own tiles (a run that ends normally has removed each as its tile read it).
+class ScratchCleanup {
+ public:
+  ScratchCleanup(const TiledOptions& t, const Plan& plan, int rank, int ranks)
+      : t_(t), plan_(plan), rank_(rank), ranks_(std::max(1, ranks)) {}
+  ScratchCleanup(const ScratchCleanup&) = delete;
+  ScratchCleanup& operator=(const ScratchCleanup&) = delete;
+  ~ScratchCleanup() {
+    if (std::uncaught_exceptions() == uncaught_) return;
+    for (std::size_t k = 0; k < plan_.tiles.size(); ++k)
+      for (int r = 0; r < ranks_; ++r)
+        if (r == rank_ || plan_.tiles[k].rank == rank_) {
+          std::error_code ec;
+          std::filesystem::remove(scratch_file(t_, k, r), ec);
+        }
+  }
+
+ private:
+  const TiledOptions& t_;
+  const Plan& plan_;
+  int rank_, ranks_;
+  int uncaught_ = std::uncaught_exceptions();
+};
+
 // The part of a tile's result whose points are the tile's own, with record numbers as
 // source_index.
 PointCloud own_part(const PointCloud& c, const std::vector<std::uint8_t>& own,
@@ -476,6 +522,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     stream(src, rb, re, chunk, [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
       if (c.attributes.size() != cols.attributes.size())
         throw std::logic_error("tiled filter: read() gave other attributes than announced");
+      check_chunk(c, rec, o);
       for (const auto& p : c.positions) box.extend(p);
       n += c.size();
       has[0] |= c.has_normals();
@@ -853,6 +900,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     }
   }
   progress("distributing", 0);
+  const ScratchCleanup cleanup(t, plan, comm.rank, comm.ranks);
   {
     const std::size_t T = plan.tiles.size();
     const std::size_t flush_at = std::clamp<std::size_t>(

@@ -9,8 +9,11 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <random>
+#include <stdexcept>
 
+#include "scanclean/core/errors.h"
 #include "support/filter_outputs.h"
 #include "support/synthetic.h"
 
@@ -235,6 +238,84 @@ TEST(TiledFilter, KernelStrideTakesTheWholeCloudsSubsampleInEveryTile) {
   // seeds and 28 outliers in one run only, 0 flags, 9e-5 h; with each tile's own subsample
   // (before): 2,122 seeds, 348 outliers, 17 flags, 0.17 h.
   expect_agreement_at_stride(d, c.size(), h);
+}
+
+// A non-finite coordinate is refused in the first pass, naming its record, before any grid or
+// index casts it to a cell (as robust_filter refuses it before its index).
+TEST(TiledFilter, ANonFiniteCoordinateIsRefusedNamingItsRecord) {
+  // Record 12346 is not among the first pass's samples of h (every 3rd record of 30,000).
+  PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 11);
+  c.positions[12346].y() = std::numeric_limits<double>::quiet_NaN();
+  const fs::path scratch =
+      fs::temp_directory_path() / ("scanclean_tiled_nan_test_" + std::to_string(::getpid()));
+  fs::create_directories(scratch);
+  TiledOptions t;
+  t.scratch = scratch;
+  t.max_tile_points = 8000;
+  t.chunk_records = 7000;
+  std::size_t sink_calls = 0;
+  try {
+    tiled_filter(source_of(c), {}, t,
+                 [&](std::size_t, const PointCloud&, const PointCloud&) { ++sink_calls; });
+    ADD_FAILURE() << "no error for a NaN coordinate";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("record 12346"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("non-finite"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(sink_calls, 0u);
+  EXPECT_TRUE(fs::is_empty(scratch));
+  fs::remove_all(scratch);
+}
+
+// A confidence outside [0, 1], where confidences are the weights, is refused the same way.
+TEST(TiledFilter, AConfidenceOutsideTheUnitIntervalIsRefusedNamingItsRecord) {
+  PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 12);
+  c.confidences.assign(c.size(), 0.5f);
+  c.confidences[20001] = 1.5f;  // not a sample of h either
+  const fs::path scratch =
+      fs::temp_directory_path() / ("scanclean_tiled_conf_test_" + std::to_string(::getpid()));
+  fs::create_directories(scratch);
+  TiledOptions t;
+  t.scratch = scratch;
+  t.max_tile_points = 8000;
+  t.chunk_records = 7000;
+  EXPECT_THROW(
+      {
+        try {
+          tiled_filter(source_of(c), {}, t,
+                       [](std::size_t, const PointCloud&, const PointCloud&) {});
+        } catch (const InputError& e) {
+          EXPECT_NE(std::string(e.what()).find("record 20001: confidence 1.5 outside [0, 1]"),
+                    std::string::npos)
+              << e.what();
+          throw;
+        }
+      },
+      InputError);
+  EXPECT_TRUE(fs::is_empty(scratch));
+  fs::remove_all(scratch);
+}
+
+// A run that ends by an exception after the distribution (here the sink's, as when the output
+// disk fills) leaves no scratch files behind: the tiles not yet filtered had theirs.
+TEST(TiledFilter, AFailedRunLeavesNoScratchFiles) {
+  const PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 13);
+  const fs::path scratch =
+      fs::temp_directory_path() / ("scanclean_tiled_fail_test_" + std::to_string(::getpid()));
+  fs::create_directories(scratch);
+  TiledOptions t;
+  t.scratch = scratch;
+  t.max_tile_points = 4000;
+  t.chunk_records = 7000;
+  std::size_t sink_calls = 0;
+  EXPECT_THROW(tiled_filter(source_of(c), {}, t,
+                            [&](std::size_t, const PointCloud&, const PointCloud&) {
+                              if (++sink_calls == 2) throw std::runtime_error("sink: disk full");
+                            }),
+               std::runtime_error);
+  EXPECT_EQ(sink_calls, 2u);
+  EXPECT_TRUE(fs::is_empty(scratch)) << "scratch files left behind";
+  fs::remove_all(scratch);
 }
 
 // The input's own attributes (a scanner's classification, GPS time, a label named like an

@@ -138,7 +138,10 @@ using TileSink =
     std::function<void(std::size_t tile, const PointCloud& cloud, const PointCloud& outliers)>;
 
 //! Runs the filter tile by tile (see the file comment). Every process of `comm` calls it with
-//! the same arguments. \throw OptionError, InputError (as robust_filter), IoError (scratch).
+//! the same arguments. \throw OptionError; InputError for a non-finite coordinate or a weight
+//! outside [0, 1], naming the record, from the first pass (before any tile reaches the sink);
+//! IoError (scratch). A run ended by an exception, the sink's included, removes this process's
+//! scratch files.
 TiledStats tiled_filter(const TiledSource& source, const FilterOptions& options,
                         const TiledOptions& tiled, const TileSink& sink, const TileComm& comm = {});
 
