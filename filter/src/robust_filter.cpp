@@ -14,6 +14,7 @@
 
 #include "clustering.h"
 #include "huge_pages.h"
+#include "input_checks.h"
 #include "input_groups.h"
 #include "kernel_sites.h"
 #include "kernels.h"
@@ -53,26 +54,12 @@ std::size_t peak_rss_bytes() {
 void check_input(const PointCloud& input, const FilterOptions& o, bool& use_w, bool& use_v) {
   const std::size_t N = input.size();
   if (N >= 0xffffffffULL) throw InputError("filter: more than 4 billion points are not supported");
-  // The first offending point, found in parallel.
-  const std::size_t bad_position =
-      detail::first_where(N, [&](std::size_t i) { return !input.positions[i].allFinite(); });
-  if (bad_position < N)
-    throw InputError("filter input", "point " + std::to_string(bad_position),
-                     "non-finite coordinate (remove invalid points before filtering)");
   use_w = o.use_confidences && input.has_confidences();
-  if (use_w) {
-    if (input.confidences.size() != N)
-      throw InputError("filter input", "confidences", "one confidence per point");
-    const std::size_t i = detail::first_where(N, [&](std::size_t k) {
-      return !(input.confidences[k] >= 0.0f && input.confidences[k] <= 1.0f);
-    });
-    if (i < N) {
-      std::ostringstream v;
-      v << input.confidences[i];
-      throw InputError("filter input", "point " + std::to_string(i),
-                       "confidence " + v.str() + " outside [0, 1]");
-    }
-  }
+  if (use_w && input.confidences.size() != N)
+    throw InputError("filter input", "confidences", "one confidence per point");
+  const detail::InvalidPoint bad = detail::first_invalid_point(input, use_w);
+  if (bad.index < N)
+    throw InputError("filter input", "point " + std::to_string(bad.index), bad.what);
   use_v = o.use_sensor_normals && input.has_normals() && input.normals.size() == N;
 }
 

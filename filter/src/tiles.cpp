@@ -14,6 +14,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "input_checks.h"
 #include "kernels.h"
 #include "neighbor_index.h"
 #include "parallel.h"
@@ -388,23 +389,18 @@ std::filesystem::path scratch_file(const TiledOptions& t, std::size_t tile, int 
   return t.scratch / name;
 }
 
-// The checks of robust_filter's input (a finite position, a confidence in [0, 1] where they are
-// the weights), made in the first pass so that the error names the record, before a grid casts
-// a coordinate to a cell and before any tile has reached the sink.
+// robust_filter's input checks (input_checks.h), made in the first pass so that the error names
+// the record, before a grid casts a coordinate to a cell and before any tile reaches the sink.
 void check_chunk(const PointCloud& c, const std::vector<std::uint64_t>& rec,
                  const FilterOptions& o) {
   const bool weights = o.use_confidences && c.has_confidences();
-  for (std::size_t i = 0; i < c.size(); ++i) {
-    if (!c.positions[i].allFinite())
-      throw InputError("tiled filter input", "record " + std::to_string(rec[i]),
-                       "non-finite coordinate (remove invalid points before filtering)");
-    if (weights && !(c.confidences[i] >= 0.0f && c.confidences[i] <= 1.0f)) {
-      std::ostringstream v;
-      v << c.confidences[i];
-      throw InputError("tiled filter input", "record " + std::to_string(rec[i]),
-                       "confidence " + v.str() + " outside [0, 1]");
-    }
-  }
+  if (weights && c.confidences.size() != c.size())
+    throw InputError("tiled filter input",
+                     rec.empty() ? "a chunk" : "the chunk from record " + std::to_string(rec[0]),
+                     "one confidence per point");
+  const detail::InvalidPoint bad = detail::first_invalid_point(c, weights);
+  if (bad.index < c.size())
+    throw InputError("tiled filter input", "record " + std::to_string(rec[bad.index]), bad.what);
 }
 
 // Removes this process's scratch files when the run ends by an exception: those it wrote and
