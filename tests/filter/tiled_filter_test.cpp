@@ -53,6 +53,30 @@ TiledSource source_of(const PointCloud& c) {
   return s;
 }
 
+// A scratch folder of one test's own, removed when the test ends; options() puts a tiled run
+// there, in many chunks.
+struct ScratchDir {
+  fs::path path;
+  explicit ScratchDir(const std::string& name)
+      : path(fs::temp_directory_path() /
+             ("scanclean_tiled_" + name + "_" + std::to_string(::getpid()))) {
+    fs::create_directories(path);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+  TiledOptions options(std::uint64_t max_tile_points) const {
+    TiledOptions t;
+    t.scratch = path;
+    t.max_tile_points = max_tile_points;
+    t.chunk_records = 7000;  // many chunks
+    return t;
+  }
+};
+
 struct Tiled {
   TiledStats stats;
   PointCloud cloud, outliers;
@@ -60,22 +84,15 @@ struct Tiled {
 };
 
 Tiled run_tiled(const PointCloud& c, const FilterOptions& o, std::uint64_t max_tile_points) {
-  const fs::path scratch =
-      fs::temp_directory_path() / ("scanclean_tiled_test_" + std::to_string(::getpid()));
-  fs::create_directories(scratch);
-  TiledOptions t;
-  t.scratch = scratch;
-  t.max_tile_points = max_tile_points;
-  t.chunk_records = 7000;  // many chunks
+  const ScratchDir scratch("test");
   Tiled r;
-  r.stats =
-      tiled_filter(source_of(c), o, t, [&](std::size_t, const PointCloud& a, const PointCloud& b) {
-        append(r.cloud, a);
-        append(r.outliers, b);
-        ++r.sink_calls;
-      });
-  EXPECT_TRUE(fs::is_empty(scratch)) << "scratch files left behind";
-  fs::remove_all(scratch);
+  r.stats = tiled_filter(source_of(c), o, scratch.options(max_tile_points),
+                         [&](std::size_t, const PointCloud& a, const PointCloud& b) {
+                           append(r.cloud, a);
+                           append(r.outliers, b);
+                           ++r.sink_calls;
+                         });
+  EXPECT_TRUE(fs::is_empty(scratch.path)) << "scratch files left behind";
   return r;
 }
 
@@ -246,16 +263,10 @@ TEST(TiledFilter, ANonFiniteCoordinateIsRefusedNamingItsRecord) {
   // Record 12346 is not among the first pass's samples of h (every 3rd record of 30,000).
   PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 11);
   c.positions[12346].y() = std::numeric_limits<double>::quiet_NaN();
-  const fs::path scratch =
-      fs::temp_directory_path() / ("scanclean_tiled_nan_test_" + std::to_string(::getpid()));
-  fs::create_directories(scratch);
-  TiledOptions t;
-  t.scratch = scratch;
-  t.max_tile_points = 8000;
-  t.chunk_records = 7000;
+  const ScratchDir scratch("nan");
   std::size_t sink_calls = 0;
   try {
-    tiled_filter(source_of(c), {}, t,
+    tiled_filter(source_of(c), {}, scratch.options(8000),
                  [&](std::size_t, const PointCloud&, const PointCloud&) { ++sink_calls; });
     ADD_FAILURE() << "no error for a NaN coordinate";
   } catch (const InputError& e) {
@@ -263,8 +274,7 @@ TEST(TiledFilter, ANonFiniteCoordinateIsRefusedNamingItsRecord) {
     EXPECT_NE(std::string(e.what()).find("non-finite"), std::string::npos) << e.what();
   }
   EXPECT_EQ(sink_calls, 0u);
-  EXPECT_TRUE(fs::is_empty(scratch));
-  fs::remove_all(scratch);
+  EXPECT_TRUE(fs::is_empty(scratch.path));
 }
 
 // A confidence outside [0, 1], where confidences are the weights, is refused the same way.
@@ -272,17 +282,11 @@ TEST(TiledFilter, AConfidenceOutsideTheUnitIntervalIsRefusedNamingItsRecord) {
   PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 12);
   c.confidences.assign(c.size(), 0.5f);
   c.confidences[20001] = 1.5f;  // not a sample of h either
-  const fs::path scratch =
-      fs::temp_directory_path() / ("scanclean_tiled_conf_test_" + std::to_string(::getpid()));
-  fs::create_directories(scratch);
-  TiledOptions t;
-  t.scratch = scratch;
-  t.max_tile_points = 8000;
-  t.chunk_records = 7000;
+  const ScratchDir scratch("conf");
   EXPECT_THROW(
       {
         try {
-          tiled_filter(source_of(c), {}, t,
+          tiled_filter(source_of(c), {}, scratch.options(8000),
                        [](std::size_t, const PointCloud&, const PointCloud&) {});
         } catch (const InputError& e) {
           EXPECT_NE(std::string(e.what()).find("record 20001: confidence 1.5 outside [0, 1]"),
@@ -292,30 +296,22 @@ TEST(TiledFilter, AConfidenceOutsideTheUnitIntervalIsRefusedNamingItsRecord) {
         }
       },
       InputError);
-  EXPECT_TRUE(fs::is_empty(scratch));
-  fs::remove_all(scratch);
+  EXPECT_TRUE(fs::is_empty(scratch.path));
 }
 
 // A run that ends by an exception after the distribution (here the sink's, as when the output
 // disk fills) leaves no scratch files behind: the tiles not yet filtered had theirs.
 TEST(TiledFilter, AFailedRunLeavesNoScratchFiles) {
   const PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 13);
-  const fs::path scratch =
-      fs::temp_directory_path() / ("scanclean_tiled_fail_test_" + std::to_string(::getpid()));
-  fs::create_directories(scratch);
-  TiledOptions t;
-  t.scratch = scratch;
-  t.max_tile_points = 4000;
-  t.chunk_records = 7000;
+  const ScratchDir scratch("fail");
   std::size_t sink_calls = 0;
-  EXPECT_THROW(tiled_filter(source_of(c), {}, t,
+  EXPECT_THROW(tiled_filter(source_of(c), {}, scratch.options(4000),
                             [&](std::size_t, const PointCloud&, const PointCloud&) {
                               if (++sink_calls == 2) throw std::runtime_error("sink: disk full");
                             }),
                std::runtime_error);
   EXPECT_EQ(sink_calls, 2u);
-  EXPECT_TRUE(fs::is_empty(scratch)) << "scratch files left behind";
-  fs::remove_all(scratch);
+  EXPECT_TRUE(fs::is_empty(scratch.path)) << "scratch files left behind";
 }
 
 // The input's own attributes (a scanner's classification, GPS time, a label named like an
