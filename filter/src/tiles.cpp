@@ -62,7 +62,7 @@ struct Reader {
     const auto n = get<std::uint64_t>();
     if (at + n * sizeof(T) > s.size()) throw std::logic_error("tiled filter: short message");
     std::vector<T> v(n);
-    std::memcpy(v.data(), s.data() + at, n * sizeof(T));
+    if (n > 0) std::memcpy(v.data(), s.data() + at, n * sizeof(T));  // (an empty v has no data)
     at += n * sizeof(T);
     return v;
   }
