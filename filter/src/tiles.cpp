@@ -403,28 +403,29 @@ void check_chunk(const PointCloud& c, const std::vector<std::uint64_t>& rec,
     throw InputError("tiled filter input", "record " + std::to_string(rec[bad.index]), bad.what);
 }
 
-// Removes this process's scratch files when the run ends by an exception: those it wrote and
-// those of its own tiles (a run that ends normally has removed each as its tile read it).
+// Removes the scratch files when the run ends by an exception (a run that ends normally has
+// removed each as its tile read it). With one process, its own. With several, every process's:
+// the others wait for this one in their next exchange, so the run is over for all of them, and
+// a process stopped there (MPI_Abort) cannot clean up after itself.
 class ScratchCleanup {
  public:
-  ScratchCleanup(const TiledOptions& t, const Plan& plan, int rank, int ranks)
-      : t_(t), plan_(plan), rank_(rank), ranks_(std::max(1, ranks)) {}
+  ScratchCleanup(const TiledOptions& t, const Plan& plan, int ranks)
+      : t_(t), plan_(plan), ranks_(std::max(1, ranks)) {}
   ScratchCleanup(const ScratchCleanup&) = delete;
   ScratchCleanup& operator=(const ScratchCleanup&) = delete;
   ~ScratchCleanup() {
     if (std::uncaught_exceptions() == uncaught_) return;
     for (std::size_t k = 0; k < plan_.tiles.size(); ++k)
-      for (int r = 0; r < ranks_; ++r)
-        if (r == rank_ || plan_.tiles[k].rank == rank_) {
-          std::error_code ec;
-          std::filesystem::remove(scratch_file(t_, k, r), ec);
-        }
+      for (int r = 0; r < ranks_; ++r) {
+        std::error_code ec;
+        std::filesystem::remove(scratch_file(t_, k, r), ec);
+      }
   }
 
  private:
   const TiledOptions& t_;
   const Plan& plan_;
-  int rank_, ranks_;
+  int ranks_;
   int uncaught_ = std::uncaught_exceptions();
 };
 
@@ -896,7 +897,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     }
   }
   progress("distributing", 0);
-  const ScratchCleanup cleanup(t, plan, comm.rank, comm.ranks);
+  const ScratchCleanup cleanup(t, plan, comm.ranks);
   {
     const std::size_t T = plan.tiles.size();
     const std::size_t flush_at = std::clamp<std::size_t>(

@@ -6,12 +6,16 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <mutex>
 #include <random>
 #include <stdexcept>
+#include <thread>
 
 #include "scanclean/core/errors.h"
 #include "support/filter_outputs.h"
@@ -312,6 +316,96 @@ TEST(TiledFilter, AFailedRunLeavesNoScratchFiles) {
                std::runtime_error);
   EXPECT_EQ(sink_calls, 2u);
   EXPECT_TRUE(fs::is_empty(scratch.path)) << "scratch files left behind";
+}
+
+// Two processes' exchange, for two threads: each call returns both threads' bytes in rank
+// order. Once a thread has failed, the other's calls throw (as MPI_Abort would end it).
+class TwoRankExchange {
+ public:
+  std::string allgather(int rank, const std::string& mine) {
+    std::unique_lock lock(m_);
+    if (failed_) throw std::runtime_error("aborted");
+    slot_[rank] = mine;
+    const int gen = generation_;
+    if (++arrived_ == 2) {
+      joined_ = slot_[0] + slot_[1];
+      arrived_ = 0;
+      ++generation_;
+      cv_.notify_all();
+      return joined_;
+    }
+    cv_.wait(lock, [&] { return generation_ != gen || failed_; });
+    if (generation_ == gen) throw std::runtime_error("aborted");
+    return joined_;
+  }
+  void fail() {
+    const std::lock_guard lock(m_);
+    failed_ = true;
+    cv_.notify_all();
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::string slot_[2], joined_;
+  int arrived_ = 0, generation_ = 0;
+  bool failed_ = false;
+};
+
+// Two processes (threads here); process 1's sink fails on its first tile while process 0 sits in
+// its own first tile's sink, as a process that scanclean-mpi's abort will stop there: by the
+// time process 1's call has thrown, no scratch file of either process is left, those of process
+// 0's tiles included (process 0 would never remove them).
+TEST(TiledFilter, AFailedProcessRemovesEveryProcesssScratchFiles) {
+  const PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 13);
+  const ScratchDir scratch("fail2");
+  TwoRankExchange exchange;
+  std::mutex m;
+  std::condition_variable cv;
+  bool in_sink0 = false, release0 = false;
+  std::size_t left_when_failed = 0;
+  std::thread rank0([&] {
+    TileComm comm{0, 2, [&](const std::string& b) { return exchange.allgather(0, b); }};
+    try {
+      tiled_filter(
+          source_of(c), {}, scratch.options(4000),
+          [&](std::size_t, const PointCloud&, const PointCloud&) {
+            std::unique_lock lock(m);
+            in_sink0 = true;
+            cv.notify_all();
+            cv.wait(lock, [&] { return release0; });
+          },
+          comm);
+    } catch (const std::exception&) {  // ended by the other's failure, as intended
+    }
+  });
+  TileComm comm{1, 2, [&](const std::string& b) { return exchange.allgather(1, b); }};
+  std::size_t sink1 = 0;
+  EXPECT_THROW(
+      tiled_filter(
+          source_of(c), {}, scratch.options(4000),
+          [&](std::size_t, const PointCloud&, const PointCloud&) {
+            ++sink1;
+            {  // process 0 is in its sink, holding its other tiles' files
+              std::unique_lock lock(m);
+              EXPECT_TRUE(cv.wait_for(lock, std::chrono::minutes(2), [&] { return in_sink0; }))
+                  << "process 0 never reached its sink";
+            }
+            throw std::runtime_error("sink: disk full");
+          },
+          comm),
+      std::runtime_error);
+  for (auto it = fs::directory_iterator(scratch.path); it != fs::directory_iterator(); ++it)
+    ++left_when_failed;
+  {
+    const std::lock_guard lock(m);
+    release0 = true;
+  }
+  exchange.fail();
+  cv.notify_all();
+  rank0.join();
+  EXPECT_EQ(sink1, 1u);
+  EXPECT_EQ(left_when_failed, 0u) << "scratch files left behind by the failed process";
 }
 
 // The input's own attributes (a scanner's classification, GPS time, a label named like an

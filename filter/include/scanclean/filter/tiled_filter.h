@@ -140,8 +140,9 @@ using TileSink =
 //! Runs the filter tile by tile (see the file comment). Every process of `comm` calls it with
 //! the same arguments. \throw OptionError; InputError for a non-finite coordinate or a weight
 //! outside [0, 1], naming the record, from the first pass (before any tile reaches the sink);
-//! IoError (scratch). A run ended by an exception, the sink's included, removes this process's
-//! scratch files.
+//! IoError (scratch). A run ended by an exception, the sink's included, removes the scratch
+//! files: with several processes, those of every process (the others, waiting for this one in
+//! their next exchange, cannot finish; scanclean-mpi aborts them).
 TiledStats tiled_filter(const TiledSource& source, const FilterOptions& options,
                         const TiledOptions& tiled, const TileSink& sink, const TileComm& comm = {});
 
