@@ -78,9 +78,7 @@ std::size_t add_viewpoint_normals(const std::string& file, const std::vector<dou
 
 void print_warnings(const std::string& file, const ReadReport& report) {
   for (const auto& w : report.warnings) std::fprintf(stderr, "scanclean: warning: %s\n", w.c_str());
-  if (report.dropped_invalid > 0)
-    std::fprintf(stderr, "scanclean: %s: %zu invalid points dropped while reading\n", file.c_str(),
-                 report.dropped_invalid);
+  warn_dropped_invalid(file, report.dropped_invalid);
 }
 
 // The tiled run (tiled_run.h) when it applies: returns the exit code, or -1 to run in memory.
@@ -146,6 +144,7 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
   const TiledGlobals& g = s.globals;
   Summary sum("scanclean filter (tiled, out of core)");
   sum.add("input", in);
+  if (r.dropped_invalid > 0) sum.add_count("invalid dropped", r.dropped_invalid);
   sum.add_count("points in", s.points_in);
   sum.add_count("points out", s.points_out);
   sum.add_count("merged into others", s.merged);
@@ -174,6 +173,7 @@ int run_filter_tiled(const FilterCommandOptions& c, const FilterOptions& o) {
   sum.add("memory budget", static_cast<double>(t.memory_budget) / 1048576.0, 0, "MiB");
   sum.add("peak memory", static_cast<double>(s.peak_rss_bytes) / 1048576.0, 1, "MiB");
   sum.print();
+  warn_dropped_invalid(in, r.dropped_invalid);
   if (!r.written) {
     std::fprintf(stderr,
                  "scanclean filter: error: the result has %llu point(s) from %llu input points, "

@@ -61,9 +61,7 @@ int run_mesh(MeshCommandOptions c) {
   ReadReport report;
   PointCloud cloud = read_point_cloud(c.input, &report);
   for (const auto& w : report.warnings) std::fprintf(stderr, "scanclean: warning: %s\n", w.c_str());
-  if (report.dropped_invalid > 0)
-    std::fprintf(stderr, "scanclean: %s: %zu invalid points dropped while reading\n",
-                 c.input.c_str(), report.dropped_invalid);
+  warn_dropped_invalid(c.input, report.dropped_invalid);
   std::string h_source = "unknown";
   if (c.mesh.h > 0) {
     h_source = "--h";

@@ -49,6 +49,13 @@ void warn_if_mostly_unsupported(unsigned long long unsupported, unsigned long lo
                h * 1000.0);
 }
 
+void warn_dropped_invalid(const std::string& file, unsigned long long dropped) {
+  if (dropped == 0) return;
+  std::fprintf(stderr,
+               "scanclean: %s: %s invalid points dropped while reading (x, y or z not finite)\n",
+               file.c_str(), with_thousands(dropped).c_str());
+}
+
 std::string with_thousands(unsigned long long value) {
   std::string s = std::to_string(value);
   for (int i = static_cast<int>(s.size()) - 3; i > 0; i -= 3)

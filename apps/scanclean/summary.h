@@ -42,4 +42,8 @@ std::string with_thousands(unsigned long long value);
 void warn_if_mostly_unsupported(unsigned long long unsupported, unsigned long long points_in,
                                 double h);
 
+//! When a reader dropped points whose x, y or z was not finite (NaN marks a missing pixel in
+//! many scanners' files): one line on stderr naming the file and the count. Nothing when 0.
+void warn_dropped_invalid(const std::string& file, unsigned long long dropped);
+
 }  // namespace scanclean::app

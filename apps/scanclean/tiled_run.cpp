@@ -65,6 +65,13 @@ std::filesystem::path part_file(const std::filesystem::path& scratch, std::size_
   return scratch / name;
 }
 
+// A name part_file() gives: "out", digits, ".part".
+bool is_part_file(const std::filesystem::path& p) {
+  const std::string n = p.filename().string();
+  return n.size() > 8 && n.starts_with("out") && n.ends_with(".part") &&
+         std::all_of(n.begin() + 3, n.end() - 5, [](char ch) { return ch >= '0' && ch <= '9'; });
+}
+
 void put_block(std::ostream& os, std::uint64_t points, const std::string& bytes) {
   const std::uint64_t size = bytes.size();
   os.write(reinterpret_cast<const char*>(&points), 8);
@@ -130,14 +137,25 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
   std::filesystem::create_directories(t.scratch, ec);
   if (!std::filesystem::is_directory(t.scratch))
     throw IoError(t.scratch.string() + ": cannot create the scratch folder");
+  // At the end, process 0 removes the private scratch folder. A run ended by an exception with
+  // several processes is over for all of them (scanclean-mpi then aborts the others, which
+  // leaves them no time to clean up): the process that failed removes the results of every
+  // process (the folder, when private; tiled_filter has removed the tiles' scratch files).
   struct Cleanup {
     std::filesystem::path dir;
-    bool on;
+    bool own, rank0, many;
+    int uncaught = std::uncaught_exceptions();
     ~Cleanup() {
+      const bool failed = std::uncaught_exceptions() > uncaught;
       std::error_code e;
-      if (on) std::filesystem::remove_all(dir, e);
+      if (own && (rank0 || (failed && many))) {
+        std::filesystem::remove_all(dir, e);
+      } else if (failed && many) {
+        for (const auto& f : std::filesystem::directory_iterator(dir, e))
+          if (is_part_file(f.path())) std::filesystem::remove(f.path(), e);
+      }
     }
-  } cleanup{t.scratch, own_scratch && req.comm.rank == 0};
+  } cleanup{t.scratch, own_scratch, req.comm.rank == 0, req.comm.ranks > 1};
 
   const bool rank0 = req.comm.rank == 0;
   const bool many = req.comm.ranks > 1;
@@ -194,6 +212,13 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
     if (!os) throw IoError(f.string() + ": cannot write a tile's result (disk full?)");
   };
   result.stats = tiled_filter(src, req.filter, t, sink, req.comm);
+  // The stream drops records whose x, y or z is not finite (as the whole-file readers do).
+  result.dropped_invalid = result.records - std::min(result.records, result.stats.points_in);
+  if (result.stats.points_in == 0)
+    throw InputError(req.input.string(),
+                     result.records == 0 ? std::string("no records")
+                                         : "all " + std::to_string(result.records) + " records",
+                     "no point with a finite x, y and z; nothing to filter");
   // (tiled_filter ends with an exchange between the processes: every part file is complete.)
   const auto& st = result.stats;
   const bool collapsed =

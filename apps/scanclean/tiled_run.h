@@ -31,8 +31,9 @@ struct TiledRunRequest {
 
 struct TiledRunResult {
   TiledStats stats;
-  std::uint64_t records = 0;  //!< records in the input file
-  bool written = false;       //!< false: collapsed result, nothing written
+  std::uint64_t records = 0;          //!< records in the input file
+  std::uint64_t dropped_invalid = 0;  //!< of them, dropped by the reader (x, y or z not finite)
+  bool written = false;               //!< false: collapsed result, nothing written
 };
 
 //! Runs it. \throw OptionError, InputError, IoError.

@@ -118,6 +118,7 @@ int run(int argc, char** argv, int rank, int ranks) {
   if (rank == 0) {
     Summary sum("scanclean-mpi");
     sum.add("processes", std::to_string(ranks));
+    if (r.dropped_invalid > 0) sum.add_count("invalid dropped", r.dropped_invalid);
     sum.add_count("points in", s.points_in);
     sum.add_count("points out", s.points_out);
     sum.add_count("outliers removed", s.outliers);
@@ -130,6 +131,8 @@ int run(int argc, char** argv, int rank, int ranks) {
         static_cast<unsigned long long>(s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
     sum.print();
     std::printf("rank tiles halo_points tile_seconds peak_MiB\n%s", per_rank.c_str());
+    std::fflush(stdout);
+    warn_dropped_invalid(input, r.dropped_invalid);
     if (r.written) warn_if_mostly_unsupported(s.unsupported, s.points_in, s.globals.h);
   }
   const bool collapsed =

@@ -4,8 +4,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -71,6 +74,87 @@ TEST_F(TiledProgram, FilterTiledWritesEveryPointOnceAcrossTiles) {
       60);
   EXPECT_EQ(bad.exit_code, 2) << bad.err;
   EXPECT_NE(bad.err.find("binary PLY only"), std::string::npos) << bad.err;
+}
+
+// A binary little-endian PLY of x y z confidence (float), written byte by byte: the library's
+// writers keep NaN positions out, and these tests need them in the file.
+void write_raw_ply(const fs::path& path, const std::vector<std::array<float, 4>>& records) {
+  std::ofstream os(path, std::ios::binary);
+  os << "ply\nformat binary_little_endian 1.0\nelement vertex " << records.size()
+     << "\nproperty float x\nproperty float y\nproperty float z\nproperty float confidence\n"
+        "end_header\n";
+  for (const auto& r : records) os.write(reinterpret_cast<const char*>(r.data()), sizeof r);
+}
+
+// The floor of the fixture's size as raw records (confidence 0.9), every 500th with a NaN z.
+std::vector<std::array<float, 4>> floor_with_nans(std::size_t n, std::size_t* nans) {
+  const PointCloud c = test::noisy_plane(n, 10.0, 0.01, 23);
+  std::vector<std::array<float, 4>> rec(c.size());
+  *nans = 0;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const bool nan = i % 500 == 7;
+    *nans += nan;
+    rec[i] = {
+        static_cast<float>(c.positions[i].x()), static_cast<float>(c.positions[i].y()),
+        nan ? std::numeric_limits<float>::quiet_NaN() : static_cast<float>(c.positions[i].z()),
+        0.9f};
+  }
+  return rec;
+}
+
+// The value of a summary row ("  points in:     29,940"), or "" when there is no such row.
+std::string summary_value(const std::string& out, const std::string& label) {
+  const std::size_t at = out.find("  " + label);
+  if (at == std::string::npos) return "";
+  std::size_t b = at + 2 + label.size();
+  while (b < out.size() && out[b] == ' ') ++b;
+  return out.substr(b, out.find('\n', b) - b);
+}
+
+bool scratch_left(const fs::path& dir) {
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().rfind(".scanclean-tiles", 0) == 0) return true;
+  return false;
+}
+
+// Records with a NaN coordinate are dropped by the stream as by the whole-file readers, and
+// counted: in the summary and in a warning, as the in-memory run counts them. A file of NaN
+// records only is an input error (exit 3), as in memory, not an empty result.
+TEST_F(TiledProgram, FilterTiledCountsTheRecordsItDrops) {
+  std::size_t nans = 0;
+  write_raw_ply(dir_ / "nan.ply", floor_with_nans(30000, &nans));
+  ASSERT_EQ(nans, 60u);
+  const auto r = test::run_program(
+      SCANCLEAN_PROGRAM,
+      {"filter", (dir_ / "nan.ply").string(), "-o", (dir_ / "nan_out.ply").string(), "--tiled"},
+      dir_, 300);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(summary_value(r.out, "invalid dropped:"), "60") << r.out;
+  EXPECT_EQ(summary_value(r.out, "points in:"), "29,940") << r.out;
+  EXPECT_NE(r.err.find("nan.ply: 60 invalid points dropped while reading"), std::string::npos)
+      << r.err;
+  // In memory the same file gives the same count.
+  const auto m = test::run_program(SCANCLEAN_PROGRAM,
+                                   {"filter", (dir_ / "nan.ply").string(), "-o",
+                                    (dir_ / "nan_mem.ply").string(), "--memory-budget", "off"},
+                                   dir_, 300);
+  ASSERT_EQ(m.exit_code, 0) << m.err;
+  EXPECT_NE(m.err.find("nan.ply: 60 invalid points dropped while reading"), std::string::npos)
+      << m.err;
+
+  write_raw_ply(dir_ / "allnan.ply",
+                std::vector<std::array<float, 4>>(
+                    50, {std::numeric_limits<float>::quiet_NaN(), 0.0f, 0.0f, 1.0f}));
+  const auto e = test::run_program(SCANCLEAN_PROGRAM,
+                                   {"filter", (dir_ / "allnan.ply").string(), "-o",
+                                    (dir_ / "allnan_out.ply").string(), "--tiled"},
+                                   dir_, 60);
+  EXPECT_EQ(e.exit_code, 3) << e.out << e.err;
+  EXPECT_NE(e.err.find("allnan.ply: all 50 records: no point with a finite x, y and z"),
+            std::string::npos)
+      << e.err;
+  EXPECT_FALSE(fs::exists(dir_ / "allnan_out.ply"));
+  EXPECT_FALSE(scratch_left(dir_));
 }
 
 #if defined(SCANCLEAN_MPI_PROGRAM) && defined(SCANCLEAN_MPIRUN)
@@ -143,6 +227,30 @@ TEST_F(TiledProgram, MpiWarnsWhenMostPointsAreUnsupported) {
   ASSERT_NE(at, std::string::npos) << all;
   EXPECT_EQ(all.find("of 10,000 points", at + 1), std::string::npos) << "warned twice:\n" << all;
   EXPECT_NE(all.find("h = 50 mm"), std::string::npos) << all;
+}
+// A record near the end of the file, in the last process's byte range, with a confidence of
+// 1.5: that process stops the run, naming the record, and aborts the others (exit 3). Nothing
+// is left behind: no output, no scratch folder (process 0, which owns it, is killed by the
+// abort and cannot remove it; the process that failed does).
+TEST_F(TiledProgram, MpiRunStoppedByOneProcessLeavesNoScratch) {
+  if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
+  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  std::size_t nans = 0;
+  auto rec = floor_with_nans(30000, &nans);
+  rec[rec.size() - 5][3] = 1.5f;
+  write_raw_ply(dir_ / "bad.ply", rec);
+  const auto r = test::run_program(SCANCLEAN_MPIRUN,
+                                   {"-np", "2", "--mca", "btl_vader_single_copy_mechanism", "none",
+                                    SCANCLEAN_MPI_PROGRAM, (dir_ / "bad.ply").string(), "-o",
+                                    (dir_ / "bad_out.ply").string(), "--memory-budget", "64M"},
+                                   dir_, 300);
+  EXPECT_EQ(r.exit_code, 3) << r.out << r.err;
+  EXPECT_NE(r.err.find("(process 1): error: tiled filter input: record 29995: confidence 1.5"),
+            std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "bad_out.ply"));
+  EXPECT_FALSE(scratch_left(dir_));
 }
 #else
 TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
