@@ -37,3 +37,19 @@ set(SCANCLEAN_INSTALL_ONIDIR "${CMAKE_INSTALL_LIBDIR}/scanclean/oni" CACHE STRIN
   "Install folder of the private OpenNI2 driver folder (relative to the prefix)")
 set(SCANCLEAN_INSTALL_PYTHONDIR "lib/python3/dist-packages" CACHE STRING
   "Install folder of the Python module (relative to the prefix; Debian's layout)")
+
+# scanclean_use_modules(<target> <PUBLIC|PRIVATE|DEFINE_ONLY> <module>...)
+# For each module built in this tree (target scanclean::<module> exists): links it with the given
+# scope (not with DEFINE_ONLY) and defines SCANCLEAN_HAVE_<MODULE>=1 for the target's own sources.
+# Modules absent from the build are skipped, so the sources compile without them.
+function(scanclean_use_modules target scope)
+  foreach(lib ${ARGN})
+    if(TARGET scanclean::${lib})
+      if(NOT scope STREQUAL "DEFINE_ONLY")
+        target_link_libraries(${target} ${scope} scanclean::${lib})
+      endif()
+      string(TOUPPER ${lib} LIB)
+      target_compile_definitions(${target} PRIVATE SCANCLEAN_HAVE_${LIB}=1)
+    endif()
+  endforeach()
+endfunction()

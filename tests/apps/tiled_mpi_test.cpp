@@ -170,11 +170,22 @@ std::string without_provenance(const std::string& ply) {
   return ply.substr(0, at) + ply.substr(end);
 }
 
-TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
-  if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
-  // CI runs as root, which OpenMPI refuses unless told.
+// mpirun `np` (e.g. {"-np", "2"}) scanclean-mpi `args`, in dir. CI runs as root, which OpenMPI
+// refuses unless told; shared memory goes without the kernel's cross-process copy (refused in
+// containers).
+test::ProgramRun run_mpi(const std::vector<std::string>& np, const std::vector<std::string>& args,
+                         const fs::path& dir) {
   ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
   ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
+  std::vector<std::string> all = np;
+  for (const char* a : {"--mca", "btl_vader_single_copy_mechanism", "none", SCANCLEAN_MPI_PROGRAM})
+    all.push_back(a);
+  all.insert(all.end(), args.begin(), args.end());
+  return test::run_program(SCANCLEAN_MPIRUN, all, dir, 300);
+}
+
+TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
+  if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
   const auto one = test::run_program(
       SCANCLEAN_PROGRAM,
       {"filter", (dir_ / "in.ply").string(), "-o", (dir_ / "one.ply").string(), "--outliers",
@@ -187,16 +198,12 @@ TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
   for (const std::vector<std::string>& np :
        {std::vector<std::string>{"-np", "2"},
         std::vector<std::string>{"-np", "4", "--oversubscribe"}}) {
-    std::vector<std::string> args = np;
-    // Shared memory without the kernel's cross-process copy (refused in containers).
-    for (const char* a : {"--mca", "btl_vader_single_copy_mechanism", "none"}) args.push_back(a);
     const std::string out = (dir_ / ("mpi" + np[1] + ".ply")).string();
     const std::string removed = (dir_ / ("mpi" + np[1] + "_removed.ply")).string();
-    for (const std::string& a :
-         {std::string(SCANCLEAN_MPI_PROGRAM), (dir_ / "in.ply").string(), std::string("-o"), out,
-          std::string("--outliers"), removed, std::string("--memory-budget"), std::string("64M")})
-      args.push_back(a);
-    const auto r = test::run_program(SCANCLEAN_MPIRUN, args, dir_, 300);
+    const auto r = run_mpi(
+        np,
+        {(dir_ / "in.ply").string(), "-o", out, "--outliers", removed, "--memory-budget", "64M"},
+        dir_);
     ASSERT_EQ(r.exit_code, 0) << "mpirun " << np[1] << " processes:\n" << r.out << r.err;
     EXPECT_NE(r.out.find("processes:"), std::string::npos) << r.out;
     EXPECT_TRUE(without_provenance(test::slurp(out)) == expected)
@@ -210,16 +217,13 @@ TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
 // kernel: written, with the warning that scanclean filter gives (process 0 prints it once).
 TEST_F(TiledProgram, MpiWarnsWhenMostPointsAreUnsupported) {
   if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
-  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
-  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
   PointCloud sphere = test::noisy_sphere(10000, 1.0, 0.01, 6);  // seed 6
   sphere.normals.clear();
   write_ply(dir_ / "sphere.ply", sphere);
-  const auto r = test::run_program(
-      SCANCLEAN_MPIRUN,
-      {"-np", "2", "--mca", "btl_vader_single_copy_mechanism", "none", SCANCLEAN_MPI_PROGRAM,
-       (dir_ / "sphere.ply").string(), "-o", (dir_ / "sphere_out.ply").string(), "--h", "0.05"},
-      dir_, 300);
+  const auto r = run_mpi(
+      {"-np", "2"},
+      {(dir_ / "sphere.ply").string(), "-o", (dir_ / "sphere_out.ply").string(), "--h", "0.05"},
+      dir_);
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_TRUE(fs::exists(dir_ / "sphere_out.ply"));
   const std::string all = r.out + r.err;
@@ -228,23 +232,21 @@ TEST_F(TiledProgram, MpiWarnsWhenMostPointsAreUnsupported) {
   EXPECT_EQ(all.find("of 10,000 points", at + 1), std::string::npos) << "warned twice:\n" << all;
   EXPECT_NE(all.find("h = 50 mm"), std::string::npos) << all;
 }
+
 // A record near the end of the file, in the last process's byte range, with a confidence of
 // 1.5: that process stops the run, naming the record, and aborts the others (exit 3). Nothing
 // is left behind: no output, no scratch folder (process 0, which owns it, is killed by the
 // abort and cannot remove it; the process that failed does).
 TEST_F(TiledProgram, MpiRunStoppedByOneProcessLeavesNoScratch) {
   if (!fs::exists(SCANCLEAN_MPIRUN)) GTEST_SKIP() << "mpirun not found: " << SCANCLEAN_MPIRUN;
-  ::setenv("OMPI_ALLOW_RUN_AS_ROOT", "1", 1);
-  ::setenv("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1", 1);
   std::size_t nans = 0;
   auto rec = floor_with_nans(30000, &nans);
   rec[rec.size() - 5][3] = 1.5f;
   write_raw_ply(dir_ / "bad.ply", rec);
-  const auto r = test::run_program(SCANCLEAN_MPIRUN,
-                                   {"-np", "2", "--mca", "btl_vader_single_copy_mechanism", "none",
-                                    SCANCLEAN_MPI_PROGRAM, (dir_ / "bad.ply").string(), "-o",
-                                    (dir_ / "bad_out.ply").string(), "--memory-budget", "64M"},
-                                   dir_, 300);
+  const auto r = run_mpi({"-np", "2"},
+                         {(dir_ / "bad.ply").string(), "-o", (dir_ / "bad_out.ply").string(),
+                          "--memory-budget", "64M"},
+                         dir_);
   EXPECT_EQ(r.exit_code, 3) << r.out << r.err;
   EXPECT_NE(r.err.find("(process 1): error: tiled filter input: record 29995: confidence 1.5"),
             std::string::npos)
