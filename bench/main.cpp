@@ -14,6 +14,7 @@
 #include "filter_run.h"
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
+#include "scanclean/core/process_memory.h"
 #include "suites.h"
 
 #ifndef SCANCLEAN_SOURCE_DIR
@@ -254,6 +255,8 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // As the programs do: every method the suites time, ours and the peers', runs with it.
+  scanclean::keep_freed_arrays_for_reuse();
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {

@@ -9,6 +9,7 @@
 
 #include "scanclean/command.h"
 #include "scanclean/core/errors.h"
+#include "scanclean/core/process_memory.h"
 #include "scanclean/run_report.h"
 
 namespace {
@@ -22,6 +23,7 @@ constexpr const char* kExitCodes =
 
 int main(int argc, char** argv) {
   using scanclean::ExitCode;
+  scanclean::keep_freed_arrays_for_reuse();  // before any allocation worth keeping
   CLI::App app{
       "scanclean: turns noisy scanner output into clean surface points.\n"
       "Robust filter of Schall, Belyaev and Seidel (2005) with OpenNI2, recording and\n"

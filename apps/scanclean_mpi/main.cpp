@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "scanclean/core/errors.h"
+#include "scanclean/core/process_memory.h"
 #include "scanclean/filter_options_cli.h"
 #include "scanclean/output_checks.h"
 #include "scanclean/provenance.h"
@@ -143,6 +144,7 @@ int run(int argc, char** argv, int rank, int ranks) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  scanclean::keep_freed_arrays_for_reuse();  // before MPI_Init, which allocates too
   MPI_Init(&argc, &argv);
   int rank = 0, ranks = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
