@@ -15,8 +15,9 @@ std::filesystem::path shared_data_dir();
 std::filesystem::path recordings_dir();
 //! The build tree (for the private OpenNI2 driver folder, <build>/oni).
 std::filesystem::path binary_dir();
-//! A fresh, empty temporary folder unique to the running test; removed by the caller or left
-//! under the system temp dir.
+//! A fresh, empty temporary folder unique to the running test, under the system temp dir. The
+//! caller may remove it; what is left is removed when the test program ends, unless a test
+//! failed or SCANCLEAN_KEEP_TEST_DIRS is set.
 std::filesystem::path make_temp_dir(const std::string& tag);
 
 }  // namespace scanclean::test
