@@ -8,7 +8,7 @@
 //! in a virtual machine. keep_freed_arrays_for_reuse() raises both thresholds once, before any
 //! work, so that blocks of up to 32 MiB (glibc's largest mmap threshold) come from the heap, and
 //! freed memory stays there, already faulted in, for the next phase: a 1M-point run takes about
-//! 19,000 page faults instead of 27,000 (README, "Stop 43" under "Benchmark"). Memory the
+//! 19,000 page faults instead of 27,000 (docs/HISTORY.md, "Stop 43"). Memory the
 //! program freed is then not returned to the system until the program ends, up to
 //! kKeptFreeBytes at the heap's top, and the peak grows a little where reused holes fit less
 //! tightly than fresh mappings (+1.9 MiB at 1M points, +7.2 MiB at 2.1M). The programs

@@ -137,8 +137,8 @@ struct FilterOptions {
   //! rounding the edge. 1.1 is the recommended value for CAD parts and other objects with sharp
   //! edges. Off by default: on the smooth protocol shapes and the real scans the benchmark
   //! measures it moved the figures by up to 2 % either way and took 40-60 % longer on the merged
-  //! bunny scans (README, "Shapes at the known limits"). With scale_regions, the scale test
-  //! also looks for such creases (see there).
+  //! bunny scans (README, "Known limits"; the tables in bench/LIMITS.md). With scale_regions,
+  //! the scale test also looks for such creases (see there).
   double crease_spread = 0;
   //! Sheet refit of the kernels (kAuto, or a fixed h with refit_noise_sigma), [0, 100]; 0 = off.
   //! A kernel whose plane leaves a residual spread sqrt(lambda_3) above refit_spread x the
