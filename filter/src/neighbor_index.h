@@ -156,7 +156,7 @@ class NeighborIndex {
 };
 
 //! The index's order of cells: the Morton code of a cell's coordinates (the low 21 bits of x, y
-//! and z interleaved). The tiled filter numbers points in this order too (tiles.cpp).
+//! and z interleaved). The tiled filter numbers points in this order too (tile_sites.h).
 std::uint64_t morton(std::int32_t x, std::int32_t y, std::int32_t z);
 
 namespace detail {
