@@ -3,7 +3,6 @@
 #include "scanclean/filter/tiled_filter.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -20,6 +19,7 @@
 #include "scanclean/core/errors.h"
 #include "support/filter_outputs.h"
 #include "support/synthetic.h"
+#include "tiled_test_support.h"
 
 namespace scanclean {
 namespace {
@@ -39,47 +39,9 @@ PointCloud scene(std::uint32_t seed) {
   return c;
 }
 
-TiledSource source_of(const PointCloud& c) {
-  TiledSource s;
-  s.records = c.size();
-  for (const Attribute& a : c.attributes) s.attributes.emplace_back(a.name, a.type);
-  s.read = [&c](std::uint64_t first, std::uint64_t count, PointCloud& out,
-                std::vector<std::uint64_t>& rec) {
-    const std::uint64_t end = std::min<std::uint64_t>(c.size(), first + count);
-    std::vector<std::size_t> idx;
-    rec.clear();
-    for (std::uint64_t i = first; i < end; ++i) {
-      idx.push_back(static_cast<std::size_t>(i));
-      rec.push_back(i);
-    }
-    out = select(c, idx);
-  };
-  return s;
-}
+using test::source_of;
 
-// A scratch folder of one test's own, removed when the test ends; options() puts a tiled run
-// there, in many chunks.
-struct ScratchDir {
-  fs::path path;
-  explicit ScratchDir(const std::string& name)
-      : path(fs::temp_directory_path() /
-             ("scanclean_tiled_" + name + "_" + std::to_string(::getpid()))) {
-    fs::create_directories(path);
-  }
-  ~ScratchDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-  ScratchDir(const ScratchDir&) = delete;
-  ScratchDir& operator=(const ScratchDir&) = delete;
-  TiledOptions options(std::uint64_t max_tile_points) const {
-    TiledOptions t;
-    t.scratch = path;
-    t.max_tile_points = max_tile_points;
-    t.chunk_records = 7000;  // many chunks
-    return t;
-  }
-};
+using test::ScratchDir;
 
 struct Tiled {
   TiledStats stats;
@@ -318,40 +280,6 @@ TEST(TiledFilter, AFailedRunLeavesNoScratchFiles) {
   EXPECT_TRUE(fs::is_empty(scratch.path)) << "scratch files left behind";
 }
 
-// Two processes' exchange, for two threads: each call returns both threads' bytes in rank
-// order. Once a thread has failed, the other's calls throw (as MPI_Abort would end it).
-class TwoRankExchange {
- public:
-  std::string allgather(int rank, const std::string& mine) {
-    std::unique_lock lock(m_);
-    if (failed_) throw std::runtime_error("aborted");
-    slot_[rank] = mine;
-    const int gen = generation_;
-    if (++arrived_ == 2) {
-      joined_ = slot_[0] + slot_[1];
-      arrived_ = 0;
-      ++generation_;
-      cv_.notify_all();
-      return joined_;
-    }
-    cv_.wait(lock, [&] { return generation_ != gen || failed_; });
-    if (generation_ == gen) throw std::runtime_error("aborted");
-    return joined_;
-  }
-  void fail() {
-    const std::lock_guard lock(m_);
-    failed_ = true;
-    cv_.notify_all();
-  }
-
- private:
-  std::mutex m_;
-  std::condition_variable cv_;
-  std::string slot_[2], joined_;
-  int arrived_ = 0, generation_ = 0;
-  bool failed_ = false;
-};
-
 // Two processes (threads here); process 1's sink fails on its first tile while process 0 sits in
 // its own first tile's sink, as a process that scanclean-mpi's abort will stop there: by the
 // time process 1's call has thrown, no scratch file of either process is left, those of process
@@ -359,7 +287,7 @@ class TwoRankExchange {
 TEST(TiledFilter, AFailedProcessRemovesEveryProcesssScratchFiles) {
   const PointCloud c = test::noisy_plane(30000, 3.0, 0.01, 13);
   const ScratchDir scratch("fail2");
-  TwoRankExchange exchange;
+  test::RankExchange exchange(2);
   std::mutex m;
   std::condition_variable cv;
   bool in_sink0 = false, release0 = false;
