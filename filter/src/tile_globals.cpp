@@ -213,20 +213,29 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
                        }
                      }
                    });
-    // Sum the histograms and join the distance lists of every process.
+    // Sum the histograms and join the distance lists of every process. A histogram travels as
+    // its occupied cells (cell, count): a surface occupies a small part of the grid's cells,
+    // and every process receives every process's message.
     if (comm.ranks > 1) {
       MessageWriter mine;
-      if (!hist_done) mine.put_vec(hist);
+      if (!hist_done) {
+        std::vector<std::array<std::uint64_t, 2>> occupied;
+        for (std::size_t i = 0; i < hist.size(); ++i)
+          if (hist[i] > 0) occupied.push_back({i, hist[i]});
+        mine.put_vec(occupied);
+      }
       for (auto& v : d2) mine.put_vec(v);
       for (auto& v : d2s) mine.put_vec(v);
       std::vector<std::uint64_t> sum(hist_done ? 0 : hist.size(), 0);
       std::vector<std::vector<float>> joined(d2.size()), joined_s(d2s.size());
       for (const std::string& m : allgather(comm, mine.bytes)) {
         MessageReader r{m};
-        if (!hist_done) {
-          const auto h = r.get_vec<std::uint64_t>();
-          for (std::size_t i = 0; i < h.size(); ++i) sum[i] += h[i];
-        }
+        if (!hist_done)
+          for (const auto& [cell, n] : r.get_vec<std::array<std::uint64_t, 2>>()) {
+            if (cell >= sum.size())
+              throw std::logic_error("tiled filter: a histogram cell outside the grid");
+            sum[cell] += n;
+          }
         for (auto* all : {&joined, &joined_s})
           for (auto& v : *all) {
             const auto part = r.get_vec<float>();

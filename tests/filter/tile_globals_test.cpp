@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <limits>
 #include <string>
 #include <vector>
@@ -117,6 +118,40 @@ TEST(TileGlobals, TheArraysPresentAreThoseOfAnyProcesssRecords) {
   EXPECT_FALSE(g.columns.confidences);
   const GlobalPasses none = passes(c, fixed, 3, 5000, c.size());
   EXPECT_FALSE(none.columns.colors);
+}
+
+// Every process receives every process's messages: a histogram travels as its occupied cells,
+// not as the grid's (about 2 million) cells, so that the exchange does not grow each process's
+// memory by 16 MB a process.
+TEST(TileGlobals, TheHistogramTravelsAsItsOccupiedCells) {
+  const PointCloud c = floor_scene(6);
+  FilterOptions fixed;  // no neighbour distances travel with it
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = 0.1;
+  const TiledSource src = test::source_of(c);
+  struct Run {
+    GlobalPasses g;
+    std::size_t largest_message = 0;
+  };
+  const std::vector<Run> runs = test::run_ranks<Run>(3, [&](const TileComm& comm) {
+    Run run;
+    TileComm counted = comm;
+    counted.allgather = [&](const std::string& mine) {
+      run.largest_message = std::max(run.largest_message, mine.size());
+      return comm.allgather(mine);
+    };
+    run.g = global_passes(src, fixed, 4.0, record_range(src.records, comm), 5000, counted, nullptr);
+    return run;
+  });
+  const GlobalPasses& g = runs[0].g;
+  std::size_t occupied = 0;
+  for (const std::uint64_t n : g.histogram) occupied += n > 0 ? 1 : 0;
+  ASSERT_GT(g.histogram.size(), 20 * occupied) << "the scene fills too much of its grid";
+  for (const Run& r : runs) {
+    EXPECT_EQ(r.g.histogram, g.histogram);
+    // At most every occupied cell (16 bytes each) and the first pass's samples (32 bytes each).
+    EXPECT_LE(r.largest_message, 16 * occupied + 32 * 10000 + 1024);
+  }
 }
 
 TEST(TileGlobals, ABadRecordIsRefusedNamingItBeforeAnyChoice) {
