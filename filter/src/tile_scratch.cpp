@@ -6,11 +6,28 @@
 #include <cstring>
 #include <exception>
 #include <iterator>
+#include <stdexcept>
 #include <system_error>
 
 #include "scanclean/core/errors.h"
 
 namespace scanclean::detail {
+
+void check_columns(const PointCloud& c, const ScratchColumns& cols) {
+  auto require = [&](bool wanted, std::size_t have, const char* what) {
+    if (wanted && have != c.size())
+      throw std::logic_error(std::string("tiled filter: read() gave a chunk without the ") + what +
+                             " that other records carry");
+  };
+  require(true, c.positions.size(), "positions");
+  require(cols.normals, c.normals.size(), "normals");
+  require(cols.confidences, c.confidences.size(), "confidences");
+  require(cols.intensities, c.intensities.size(), "intensities");
+  require(cols.colors, c.colors.size(), "colours");
+  if (c.attributes.size() != cols.attributes.size())
+    throw std::logic_error("tiled filter: read() gave other attributes than announced");
+  for (const Attribute& a : c.attributes) require(true, a.values.size(), "attribute values");
+}
 
 void put_point(std::string& buf, const PointCloud& c, std::size_t i, std::uint64_t record,
                const ScratchColumns& cols) {

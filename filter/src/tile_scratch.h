@@ -33,6 +33,11 @@ struct ScratchColumns {
   }
 };
 
+//! Checks that c carries every array `cols` names, one value a point, and exactly cols'
+//! attributes. \throw std::logic_error naming the array: the source's chunks disagree (a
+//! TiledSource must fill the same arrays in every chunk).
+void check_columns(const PointCloud& c, const ScratchColumns& cols);
+
 //! Appends point i of c to buf as one record numbered `record`. c holds every array `cols`
 //! names, and exactly cols.attributes' attributes, in that order.
 void put_point(std::string& buf, const PointCloud& c, std::size_t i, std::uint64_t record,

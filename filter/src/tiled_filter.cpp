@@ -145,6 +145,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     const std::uint64_t my_records = range[1] - range[0] + 1;
     detail::stream_records(src, range[0], range[1], t.chunk_records,
                            [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
+                             detail::check_columns(c, g.columns);
                              for (std::size_t i = 0; i < c.size(); ++i) {
                                halo.tiles_of(c.positions[i], hits);
                                std::uint64_t tagged = rec[i];

@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -89,6 +90,36 @@ TEST(TileScratch, RecordsReadBackAsWrittenWithEveryArray) {
   read_points(dir.path / "t.pts", cols, back, rec);
   EXPECT_EQ(back.size(), 2 * c.size());
   EXPECT_EQ(back.attributes[1].values.size(), 2 * c.size());
+}
+
+// A chunk that lacks an array other records carry (a source whose chunks disagree) is refused
+// before any of its records is written: its records would be read past their arrays' ends.
+TEST(TileScratch, AChunkWithoutAnArrayOtherRecordsCarryIsRefused) {
+  const PointCloud full = full_cloud(10, 7);
+  const ScratchColumns cols = all_columns(full);
+  EXPECT_NO_THROW(check_columns(full, cols));
+  const std::pair<const char*, std::function<void(PointCloud&)>> cuts[] = {
+      {"normals", [](PointCloud& c) { c.normals.clear(); }},
+      {"confidences", [](PointCloud& c) { c.confidences.pop_back(); }},
+      {"intensities", [](PointCloud& c) { c.intensities.clear(); }},
+      {"colours", [](PointCloud& c) { c.colors.clear(); }},
+      {"attribute values", [](PointCloud& c) { c.attributes[1].values.pop_back(); }},
+      {"other attributes", [](PointCloud& c) { c.attributes.pop_back(); }},
+  };
+  for (const auto& [what, cut] : cuts) {
+    PointCloud c = full;
+    cut(c);
+    try {
+      check_columns(c, cols);
+      ADD_FAILURE() << "a chunk without its " << what << " passed";
+    } catch (const std::logic_error& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  }
+  // Arrays the other records do not carry are left out of the records: no error.
+  ScratchColumns positions_only;
+  for (const Attribute& a : full.attributes) positions_only.attributes.emplace_back(a.name, a.type);
+  EXPECT_NO_THROW(check_columns(full, positions_only));
 }
 
 TEST(TileScratch, PositionsOnlyTakeThirtyTwoBytesARecord) {
