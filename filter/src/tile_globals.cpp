@@ -33,17 +33,11 @@ void check_chunk(const PointCloud& c, const std::vector<std::uint64_t>& rec,
     throw InputError("tiled filter input", "record " + std::to_string(rec[bad.index]), bad.what);
 }
 
-// The samples of the automatic h (the records k N / 10,000, as robust_filter samples them) that
-// are valid, in record order, and their positions.
-struct Samples {
-  std::vector<std::uint64_t> records;
-  std::vector<Eigen::Vector3d> positions;
-};
-
-// Pass 1: box, count, arrays present, the samples.
-Samples first_pass(const TiledSource& src, const FilterOptions& o,
-                   std::array<std::uint64_t, 2> range, std::size_t chunk, const TileComm& comm,
-                   GlobalPasses& g) {
+// Pass 1: box, count, arrays present; returns the positions of the samples of the automatic h
+// (the records k N / 10,000, as robust_filter samples them) that are valid, in record order.
+std::vector<Eigen::Vector3d> first_pass(const TiledSource& src, const FilterOptions& o,
+                                        std::array<std::uint64_t, 2> range, std::size_t chunk,
+                                        const TileComm& comm, GlobalPasses& g) {
   TiledGlobals& gl = g.globals;
   ScratchColumns& cols = g.columns;
   const std::uint64_t M = std::min<std::uint64_t>(src.records, 10000);
@@ -70,10 +64,7 @@ Samples first_pass(const TiledSource& src, const FilterOptions& o,
         has[3] |= c.has_colors();
         for (std::size_t i = 0; i < c.size(); ++i) {
           while (next < sample_rec.size() && sample_rec[next] < rec[i]) ++next;
-          if (next < sample_rec.size() && sample_rec[next] == rec[i]) {
-            samples.put<std::uint64_t>(rec[i]);
-            samples.put(c.positions[i]);
-          }
+          if (next < sample_rec.size() && sample_rec[next] == rec[i]) samples.put(c.positions[i]);
         }
       });
   MessageWriter mine;
@@ -82,7 +73,7 @@ Samples first_pass(const TiledSource& src, const FilterOptions& o,
   mine.put<std::uint64_t>(n);
   mine.bytes.append(reinterpret_cast<const char*>(has), 4);
   mine.put_vec(std::vector<char>(samples.bytes.begin(), samples.bytes.end()));
-  Samples s;
+  std::vector<Eigen::Vector3d> sample_positions;
   for (const std::string& m : allgather(comm, mine.bytes)) {
     MessageReader r{m};
     const auto lo = r.get<Eigen::Vector3d>(), hi = r.get<Eigen::Vector3d>();
@@ -99,12 +90,10 @@ Samples first_pass(const TiledSource& src, const FilterOptions& o,
     const std::vector<char> sv = r.get_vec<char>();
     const std::string ss(sv.begin(), sv.end());
     MessageReader sr{ss};
-    while (!sr.done()) {  // in record order (ranks read ascending ranges)
-      s.records.push_back(sr.get<std::uint64_t>());
-      s.positions.push_back(sr.get<Eigen::Vector3d>());
-    }
+    while (!sr.done())  // in record order (ranks read ascending ranges)
+      sample_positions.push_back(sr.get<Eigen::Vector3d>());
   }
-  return s;
+  return sample_positions;
 }
 
 // A map from the cells (of size R) around sample positions to the samples: each sample is
@@ -369,14 +358,14 @@ GlobalPasses global_passes(const TiledSource& src, const FilterOptions& o, doubl
   GlobalPasses g;
   TiledGlobals& gl = g.globals;
   if (progress) progress("first pass", 0);
-  const Samples samples = first_pass(src, o, range, chunk, comm, g);
+  const std::vector<Eigen::Vector3d> samples = first_pass(src, o, range, chunk, comm, g);
   if (gl.points == 0) return g;
   const Eigen::Vector3d origin = gl.box.center();
   const double diag = gl.box.diagonal().norm();
   const double fallback_h = diag > 0 ? 1e-3 * diag : 1e-3;
   g.grid = occupancy_grid(gl.box);
   std::vector<Eigen::Vector3f> qf;  // the samples, float, relative to the origin
-  for (const Eigen::Vector3d& p : samples.positions) qf.push_back((p - origin).cast<float>());
+  for (const Eigen::Vector3d& p : samples) qf.push_back((p - origin).cast<float>());
   std::vector<double> kth;
   histogram_and_neighbours(src, o, range, chunk, comm, origin, qf, kth, g);
   gl.h0 = 0;
