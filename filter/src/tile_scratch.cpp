@@ -19,7 +19,6 @@ void check_columns(const PointCloud& c, const ScratchColumns& cols) {
       throw std::logic_error(std::string("tiled filter: read() gave a chunk without the ") + what +
                              " that other records carry");
   };
-  require(true, c.positions.size(), "positions");
   require(cols.normals, c.normals.size(), "normals");
   require(cols.confidences, c.confidences.size(), "confidences");
   require(cols.intensities, c.intensities.size(), "intensities");
