@@ -1,5 +1,9 @@
 #include "scanclean/core/process_memory.h"
 
+#include <fstream>
+#include <sstream>
+#include <string>
+
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
@@ -25,6 +29,20 @@ bool keep_freed_arrays_for_reuse() noexcept {
 #else
   return false;
 #endif
+}
+
+std::size_t peak_resident_bytes() {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      std::istringstream s(line.substr(6));
+      std::size_t kb = 0;
+      s >> kb;
+      return kb * 1024;
+    }
+  }
+  return 0;
 }
 
 }  // namespace scanclean

@@ -6,9 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <fstream>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -27,6 +25,7 @@
 #include "projection.h"
 #include "scale.h"
 #include "scanclean/core/errors.h"
+#include "scanclean/core/process_memory.h"
 
 namespace scanclean {
 namespace {
@@ -34,20 +33,6 @@ namespace {
 using detail::Clock;
 using detail::parallel_each;
 using detail::seconds_since;
-
-std::size_t peak_rss_bytes() {
-  std::ifstream f("/proc/self/status");
-  std::string line;
-  while (std::getline(f, line)) {
-    if (line.rfind("VmHWM:", 0) == 0) {
-      std::istringstream s(line.substr(6));
-      std::size_t kb = 0;
-      s >> kb;
-      return kb * 1024;
-    }
-  }
-  return 0;
-}
 
 // Throws InputError for a non-finite coordinate or a confidence outside [0, 1]; returns whether
 // the input's confidences are the weights and its normals the sensor normals.
@@ -406,7 +391,7 @@ FilterResult run(const PointCloud& input, const FilterOptions& o) {
   result.stats.points_in = N;
   result.stats.threads = tbb::this_task_arena::max_concurrency();
   result.stats.seconds_total = seconds_since(t_start);
-  result.stats.peak_rss_bytes = peak_rss_bytes();
+  result.stats.peak_rss_bytes = peak_resident_bytes();
   return result;
 }
 

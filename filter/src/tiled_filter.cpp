@@ -8,7 +8,6 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -18,6 +17,7 @@
 #include "kernels.h"
 #include "parallel.h"
 #include "scanclean/core/errors.h"
+#include "scanclean/core/process_memory.h"
 #include "tile_exchange.h"
 #include "tile_globals.h"
 #include "tile_plan.h"
@@ -29,15 +29,6 @@ namespace {
 
 using detail::Clock;
 using detail::seconds_since;
-
-std::size_t peak_rss() {
-  std::ifstream f("/proc/self/status");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("VmHWM:", 0) == 0)
-      return static_cast<std::size_t>(std::stoull(line.substr(6))) * 1024;
-  return 0;
-}
 
 // The part of a tile's result whose points are the tile's own, with record numbers as
 // source_index.
@@ -238,7 +229,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
     st.merged = sums[3];
   }
   st.seconds_total = seconds_since(t_start);
-  st.peak_rss_bytes = peak_rss();
+  st.peak_rss_bytes = peak_resident_bytes();
   return st;
 }
 

@@ -37,3 +37,16 @@ TEST(ProcessMemory, AFreedArrayIsReusedWithoutNewPageFaults) {
   const long faults = minor_faults() - before;
   EXPECT_LT(faults, 64) << "pages faulted in again: " << faults << " of " << kBytes / 4096;
 }
+
+// The peak resident memory covers an array the process has written, and never falls.
+TEST(ProcessMemory, ThePeakCoversAWrittenArrayAndNeverFalls) {
+  const std::size_t before = scanclean::peak_resident_bytes();
+  ASSERT_GT(before, 0u) << "no VmHWM in /proc/self/status";
+  constexpr std::size_t kBytes = std::size_t{48} << 20;
+  {
+    std::unique_ptr<volatile std::uint8_t[]> a(new volatile std::uint8_t[kBytes]);
+    for (std::size_t i = 0; i < kBytes; i += 4096) a[i] = 1;
+    EXPECT_GE(scanclean::peak_resident_bytes(), kBytes);
+  }
+  EXPECT_GE(scanclean::peak_resident_bytes(), before);
+}

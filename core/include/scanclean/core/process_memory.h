@@ -30,4 +30,8 @@ constexpr std::size_t kHeapBlockMaxBytes = std::size_t{32} << 20;
 //! either way.
 bool keep_freed_arrays_for_reuse() noexcept;
 
+//! The process's peak resident memory so far, in bytes (VmHWM of /proc/self/status); 0 where
+//! the system does not report it.
+std::size_t peak_resident_bytes();
+
 }  // namespace scanclean
