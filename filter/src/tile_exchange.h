@@ -52,7 +52,8 @@ struct MessageReader {
     const auto n = get<std::uint64_t>();
     if (n > (bytes.size() - at) / sizeof(T)) throw std::logic_error("tiled filter: short message");
     std::vector<T> v(n);
-    if (n > 0) std::memcpy(v.data(), bytes.data() + at, n * sizeof(T));  // (an empty v has no data)
+    if (n > 0)  // (an empty v has no data)
+      std::memcpy(static_cast<void*>(v.data()), bytes.data() + at, n * sizeof(T));
     at += n * sizeof(T);
     return v;
   }

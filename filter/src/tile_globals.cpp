@@ -33,6 +33,20 @@ void check_chunk(const PointCloud& c, const std::vector<std::uint64_t>& rec,
     throw InputError("tiled filter input", "record " + std::to_string(rec[bad.index]), bad.what);
 }
 
+// The samples of the automatic h: the records k N / M, k < M, as robust_filter samples them.
+std::uint64_t sample_count(std::uint64_t records) {
+  return std::min<std::uint64_t>(records, 10000);
+}
+
+// What the passes after the first derive from its box.
+struct Frame {
+  Eigen::Vector3d origin;  // the box centre, origin of the float coordinates (as robust_filter's)
+  double diag = 0;         // the box diagonal
+  // h where no distance is found: 1e-3 of the diagonal (1e-3 m for a box of one location)
+  double fallback_h = 0;
+  double whole = 0;  // a reach that holds every point from any point: 2 diag + fallback_h
+};
+
 // Pass 1: box, count, arrays present; returns the positions of the samples of the automatic h
 // (the records k N / 10,000, as robust_filter samples them) that are valid, in record order.
 std::vector<Eigen::Vector3d> first_pass(const TiledSource& src, const FilterOptions& o,
@@ -40,39 +54,38 @@ std::vector<Eigen::Vector3d> first_pass(const TiledSource& src, const FilterOpti
                                         const TileComm& comm, GlobalPasses& g) {
   TiledGlobals& gl = g.globals;
   ScratchColumns& cols = g.columns;
-  const std::uint64_t M = std::min<std::uint64_t>(src.records, 10000);
+  const std::uint64_t M = sample_count(src.records);
   std::vector<std::uint64_t> sample_rec(M);
   for (std::uint64_t k = 0; k < M; ++k) sample_rec[k] = k * src.records / M;
   cols.attributes = src.attributes;
   Eigen::AlignedBox3d box;
   std::uint64_t n = 0;
   std::uint8_t has[4] = {0, 0, 0, 0};
-  MessageWriter samples;
+  std::vector<Eigen::Vector3d> samples;
   std::size_t next = static_cast<std::size_t>(
       std::lower_bound(sample_rec.begin(), sample_rec.end(), range[0]) - sample_rec.begin());
-  stream_records(
-      src, range[0], range[1], chunk,
-      [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
-        if (c.attributes.size() != cols.attributes.size())
-          throw std::logic_error("tiled filter: read() gave other attributes than announced");
-        check_chunk(c, rec, o);
-        for (const auto& p : c.positions) box.extend(p);
-        n += c.size();
-        has[0] |= c.has_normals();
-        has[1] |= c.has_confidences();
-        has[2] |= c.has_intensities();
-        has[3] |= c.has_colors();
-        for (std::size_t i = 0; i < c.size(); ++i) {
-          while (next < sample_rec.size() && sample_rec[next] < rec[i]) ++next;
-          if (next < sample_rec.size() && sample_rec[next] == rec[i]) samples.put(c.positions[i]);
-        }
-      });
+  stream_records(src, range[0], range[1], chunk,
+                 [&](const PointCloud& c, const std::vector<std::uint64_t>& rec) {
+                   check_columns(c, cols);  // the announced attributes (the arrays are found here)
+                   check_chunk(c, rec, o);
+                   for (const auto& p : c.positions) box.extend(p);
+                   n += c.size();
+                   has[0] |= c.has_normals();
+                   has[1] |= c.has_confidences();
+                   has[2] |= c.has_intensities();
+                   has[3] |= c.has_colors();
+                   for (std::size_t i = 0; i < c.size(); ++i) {
+                     while (next < sample_rec.size() && sample_rec[next] < rec[i]) ++next;
+                     if (next < sample_rec.size() && sample_rec[next] == rec[i])
+                       samples.push_back(c.positions[i]);
+                   }
+                 });
   MessageWriter mine;
   mine.put(box.min());
   mine.put(box.max());
   mine.put<std::uint64_t>(n);
   mine.bytes.append(reinterpret_cast<const char*>(has), 4);
-  mine.put_vec(std::vector<char>(samples.bytes.begin(), samples.bytes.end()));
+  mine.put_vec(samples);
   std::vector<Eigen::Vector3d> sample_positions;
   for (const std::string& m : allgather(comm, mine.bytes)) {
     MessageReader r{m};
@@ -87,11 +100,9 @@ std::vector<Eigen::Vector3d> first_pass(const TiledSource& src, const FilterOpti
     cols.confidences |= h4[1] != 0;
     cols.intensities |= h4[2] != 0;
     cols.colors |= h4[3] != 0;
-    const std::vector<char> sv = r.get_vec<char>();
-    const std::string ss(sv.begin(), sv.end());
-    MessageReader sr{ss};
-    while (!sr.done())  // in record order (ranks read ascending ranges)
-      sample_positions.push_back(sr.get<Eigen::Vector3d>());
+    const std::vector<Eigen::Vector3d> theirs = r.get_vec<Eigen::Vector3d>();
+    // In record order: the processes read ascending ranges.
+    sample_positions.insert(sample_positions.end(), theirs.begin(), theirs.end());
   }
   return sample_positions;
 }
@@ -129,17 +140,15 @@ class SampleCells {
 };
 
 // Pass 2: the histogram, and the K-th neighbour distances of the samples `qf` (their positions,
-// float, relative to `origin`; kAuto, kAdaptive) into `kth`; kAuto also the rough estimate
+// float, relative to frame.origin; kAuto, kAdaptive) into `kth`; kAuto also the rough estimate
 // (scale.h's r_est) into g.r_est.
 void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
                               std::array<std::uint64_t, 2> range, std::size_t chunk,
-                              const TileComm& comm, const Eigen::Vector3d& origin,
+                              const TileComm& comm, const Frame& frame,
                               const std::vector<Eigen::Vector3f>& qf, std::vector<double>& kth,
                               GlobalPasses& g) {
   const TiledGlobals& gl = g.globals;
   const int K = o.scale == ScaleMode::kAdaptive ? o.k_adaptive : o.k_h;
-  const double diag = gl.box.diagonal().norm();
-  const double fallback_h = diag > 0 ? 1e-3 * diag : 1e-3;
   g.histogram.assign(g.grid.cells(), 0);
   kth.assign(qf.size(), 0.0);
   double reach = 0;
@@ -158,7 +167,7 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
             std::sqrt(static_cast<double>(K + 1) * static_cast<double>(qf.size()) /
                       (8.0 * static_cast<double>(gl.points))) *
             2.0;
-    if (!(reach > 0)) reach = fallback_h;
+    if (!(reach > 0)) reach = frame.fallback_h;
   }
   // Each pass takes the samples still short of K + 1 neighbours (sparse clutter) with a reach
   // three times the last one's; the others keep their distances.
@@ -188,7 +197,7 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
                        const Eigen::Vector3d& p = c.positions[i];
                        if (!hist_done) ++hist[g.grid.flat(g.grid.cell_of(p))];
                        if (!need_kth) continue;
-                       const Eigen::Vector3f pf = (p - origin).cast<float>();
+                       const Eigen::Vector3f pf = (p - frame.origin).cast<float>();
                        const std::vector<std::uint32_t>* near = cells.near(pf);
                        if (!near) continue;
                        for (std::uint32_t k : *near) {
@@ -236,7 +245,7 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
       d2s = std::move(joined_s);
     }
     hist_done = true;
-    const bool all_within = reach >= 2 * diag + fallback_h;
+    const bool all_within = reach >= frame.whole;
     std::vector<std::uint32_t> still;
     for (std::size_t k = 0; k < active.size(); ++k) {
       const std::uint32_t a = active[k];
@@ -258,11 +267,11 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
       if (!kth_done[a] || (want_est && est[a] < 0)) still.push_back(a);
     }
     active = std::move(still);
-    reach = std::min(reach * 3.0, 2 * diag + fallback_h);
+    reach = std::min(reach * 3.0, frame.whole);
   }
   if (want_est) {
     g.r_est = median_of(est);
-    if (!(g.r_est > 0)) g.r_est = fallback_h;
+    if (!(g.r_est > 0)) g.r_est = frame.fallback_h;
   }
 }
 
@@ -271,15 +280,11 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
 // whole cloud; repeated with a wider radius while it reached farther than the points gathered.
 void noise_and_scale(const TiledSource& src, const FilterOptions& o,
                      std::array<std::uint64_t, 2> range, std::size_t chunk, const TileComm& comm,
-                     const Eigen::Vector3d& origin, const std::vector<Eigen::Vector3f>& qf,
-                     GlobalPasses& g) {
+                     const Frame& frame, const std::vector<Eigen::Vector3f>& qf, GlobalPasses& g) {
   TiledGlobals& gl = g.globals;
-  const double diag = gl.box.diagonal().norm();
-  const double fallback_h = diag > 0 ? 1e-3 * diag : 1e-3;
   const bool use_w = o.use_confidences && g.columns.confidences;
   const bool use_v = o.use_sensor_normals && g.columns.normals;
-  const std::size_t M = std::min<std::uint64_t>(src.records, 10000);
-  const std::size_t step = M >= 4000 ? 4 : 1;
+  const std::size_t step = sample_count(src.records) >= 4000 ? 4 : 1;
   std::vector<std::uint32_t> qs;  // indices into qf
   for (std::size_t k = 0; k < qf.size(); k += step) qs.push_back(static_cast<std::uint32_t>(k));
   double R = 3.0 * gl.h0;
@@ -290,7 +295,7 @@ void noise_and_scale(const TiledSource& src, const FilterOptions& o,
     stream_records(src, range[0], range[1], chunk,
                    [&](const PointCloud& c, const std::vector<std::uint64_t>&) {
                      for (std::size_t i = 0; i < c.size(); ++i) {
-                       const Eigen::Vector3f pf = (c.positions[i] - origin).cast<float>();
+                       const Eigen::Vector3f pf = (c.positions[i] - frame.origin).cast<float>();
                        const std::vector<std::uint32_t>* near = cells.near(pf);
                        if (!near) continue;
                        bool hit = false;
@@ -310,7 +315,7 @@ void noise_and_scale(const TiledSource& src, const FilterOptions& o,
     for (const std::string& m : allgather(comm, mine.bytes)) {
       MessageReader r{m};
       while (!r.done()) {
-        gathered.p.push_back(r.get<Eigen::Vector3d>() - origin);
+        gathered.p.push_back(r.get<Eigen::Vector3d>() - frame.origin);
         const auto v = r.get<Eigen::Vector3f>();
         const float w = r.get<float>();
         if (use_v) {
@@ -337,15 +342,15 @@ void noise_and_scale(const TiledSource& src, const FilterOptions& o,
     const std::vector<std::size_t> in_g_sigma(
         in_g.begin(), in_g.begin() + static_cast<std::ptrdiff_t>(qf.size() / step));
     const TileScale ts =
-        scale_from_neighbourhoods(gathered, in_g_sigma, in_g, gl.h0, diag, use_v, o);
-    if (ts.reach <= R || R >= 2 * diag + fallback_h) {
+        scale_from_neighbourhoods(gathered, in_g_sigma, in_g, gl.h0, frame.diag, use_v, o);
+    if (ts.reach <= R || R >= frame.whole) {
       gl.h = ts.h;
       gl.noise_sigma = ts.noise_sigma;
       gl.noise_sigma_h0 = ts.noise_sigma_h0;
       gl.h_noise = ts.h_noise;
       return;
     }
-    R = std::min(ts.reach * 1.25, 2 * diag + fallback_h);
+    R = std::min(ts.reach * 1.25, frame.whole);
   }
 }
 
@@ -360,23 +365,25 @@ GlobalPasses global_passes(const TiledSource& src, const FilterOptions& o, doubl
   if (progress) progress("first pass", 0);
   const std::vector<Eigen::Vector3d> samples = first_pass(src, o, range, chunk, comm, g);
   if (gl.points == 0) return g;
-  const Eigen::Vector3d origin = gl.box.center();
-  const double diag = gl.box.diagonal().norm();
-  const double fallback_h = diag > 0 ? 1e-3 * diag : 1e-3;
+  Frame frame;
+  frame.origin = gl.box.center();
+  frame.diag = gl.box.diagonal().norm();
+  frame.fallback_h = frame.diag > 0 ? 1e-3 * frame.diag : 1e-3;
+  frame.whole = 2 * frame.diag + frame.fallback_h;
   g.grid = occupancy_grid(gl.box);
   std::vector<Eigen::Vector3f> qf;  // the samples, float, relative to the origin
-  for (const Eigen::Vector3d& p : samples) qf.push_back((p - origin).cast<float>());
+  for (const Eigen::Vector3d& p : samples) qf.push_back((p - frame.origin).cast<float>());
   std::vector<double> kth;
-  histogram_and_neighbours(src, o, range, chunk, comm, origin, qf, kth, g);
+  histogram_and_neighbours(src, o, range, chunk, comm, frame, qf, kth, g);
   gl.h0 = 0;
   if (o.scale == ScaleMode::kFixed) {
     gl.h = o.h;
   } else {
     const double med = median_of(kth);
-    gl.h0 = med > 0 ? med : fallback_h;
+    gl.h0 = med > 0 ? med : frame.fallback_h;
     gl.h = gl.h0;
   }
-  if (o.scale == ScaleMode::kAuto) noise_and_scale(src, o, range, chunk, comm, origin, qf, g);
+  if (o.scale == ScaleMode::kAuto) noise_and_scale(src, o, range, chunk, comm, frame, qf, g);
 
   // What follows from h, as robust_filter decides it on the whole cloud.
   const int K = o.scale == ScaleMode::kAdaptive ? o.k_adaptive : o.k_h;

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "../../filter/src/neighbor_index.h"
+#include "../../filter/src/parallel.h"
 #include "../../filter/src/tile_exchange.h"
 #include "tiled_test_support.h"
 
@@ -35,15 +36,9 @@ PointCloud clumps(std::size_t n, std::uint32_t seed) {
   return c;
 }
 
-Eigen::AlignedBox3d box_of(const PointCloud& c) {
-  Eigen::AlignedBox3d b;
-  for (const auto& p : c.positions) b.extend(p);
-  return b;
-}
-
 // The in-memory run's order: its point index over the float points relative to the box centre.
 std::vector<std::uint32_t> index_order(const PointCloud& c, double cell) {
-  const Eigen::Vector3d origin = box_of(c).center();
+  const Eigen::Vector3d origin = bounding_box_of(c.positions).center();
   std::vector<Eigen::Vector3f> pf;
   for (const auto& p : c.positions) pf.push_back((p - origin).cast<float>());
   const NeighborIndex index(pf, cell);
@@ -52,7 +47,7 @@ std::vector<std::uint32_t> index_order(const PointCloud& c, double cell) {
 
 TEST(TileSites, TheSiteGridOrdersPointsAsThePointIndexDoes) {
   const PointCloud c = clumps(30000, 3);
-  const Eigen::AlignedBox3d box = box_of(c);
+  const Eigen::AlignedBox3d box = bounding_box_of(c.positions);
   const Eigen::Vector3d origin = box.center();
   // Cells of about a clump, of a point spacing, and so small that the index caps its cell count.
   for (const double cell : {0.9, 0.05, 1e-6}) {
@@ -72,7 +67,7 @@ TEST(TileSites, TheSiteGridOrdersPointsAsThePointIndexDoes) {
 std::set<std::uint64_t> marked_sites(const PointCloud& c, double cell, std::uint64_t stride,
                                      int ranks) {
   const TiledSource src = test::source_of(c);
-  const Eigen::AlignedBox3d box = box_of(c);
+  const Eigen::AlignedBox3d box = bounding_box_of(c.positions);
   const std::vector<std::vector<std::uint64_t>> per_rank =
       test::run_ranks<std::vector<std::uint64_t>>(ranks, [&](const TileComm& comm) {
         const auto range = record_range(src.records, comm);
