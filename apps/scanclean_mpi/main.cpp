@@ -8,6 +8,8 @@
 #include <mpi.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cstdint>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -66,6 +68,15 @@ std::string allgather(const std::string& mine) {
   return all;
 }
 
+// Every process's counts summed, in place (the same length on every process).
+void sum(std::vector<std::uint64_t>& counts) {
+  constexpr std::size_t kPiece = std::size_t{1} << 27;  // MPI counts are int
+  for (std::size_t at = 0; at < counts.size(); at += kPiece)
+    MPI_Allreduce(MPI_IN_PLACE, counts.data() + at,
+                  static_cast<int>(std::min(kPiece, counts.size() - at)), MPI_UINT64_T, MPI_SUM,
+                  MPI_COMM_WORLD);
+}
+
 int run(int argc, char** argv, int rank, int ranks) {
   using namespace scanclean;
   using namespace scanclean::app;
@@ -108,6 +119,7 @@ int run(int argc, char** argv, int rank, int ranks) {
   req.comm.rank = rank;
   req.comm.ranks = ranks;
   req.comm.allgather = allgather;
+  req.comm.sum = sum;
   const TiledRunResult r = run_tiled(req);
   const TiledStats& s = r.stats;
   // Per-process figures to process 0, which prints them.

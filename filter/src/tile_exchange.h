@@ -64,6 +64,13 @@ struct MessageReader {
 //! exchange returns another number of messages than processes.
 std::vector<std::string> allgather(const TileComm& comm, const std::string& mine);
 
+//! Whether the processes' histograms of `hist.size()` cells are summed as whole arrays
+//! (comm.sum) rather than gathered as their occupied cells: when comm.sum is given and the cells
+//! occupied on every process, gathered (16 bytes each), would take more than the array (8 bytes
+//! a cell) that comm.sum reduces. Every process of `comm` must call it (it gathers their counts
+//! of occupied cells) and gets the same answer. False for one process.
+bool sum_histograms_as_arrays(const TileComm& comm, const std::vector<std::uint64_t>& hist);
+
 //! The records this process reads, [first, last): the records split into comm.ranks ranges in
 //! rank order, whose sizes differ by at most one.
 std::array<std::uint64_t, 2> record_range(std::uint64_t records, const TileComm& comm);

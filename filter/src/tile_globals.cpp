@@ -213,10 +213,15 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
                    });
     // Sum the histograms and join the distance lists of every process. A histogram travels as
     // its occupied cells (cell, count): a surface occupies a small part of the grid's cells,
-    // and every process receives every process's message.
+    // and every process receives every process's message. Where the processes' occupied cells
+    // together would outweigh the array (many processes, each reading records from all over the
+    // scene), the arrays are summed instead (comm.sum): the same counts.
     if (comm.ranks > 1) {
+      const bool as_arrays = !hist_done && sum_histograms_as_arrays(comm, hist);
+      if (as_arrays) comm.sum(hist);
+      const bool gather_hist = !hist_done && !as_arrays;
       MessageWriter mine;
-      if (!hist_done) {
+      if (gather_hist) {
         std::vector<std::array<std::uint64_t, 2>> occupied;
         for (std::size_t i = 0; i < hist.size(); ++i)
           if (hist[i] > 0) occupied.push_back({i, hist[i]});
@@ -224,11 +229,11 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
       }
       for (auto& v : d2) mine.put_vec(v);
       for (auto& v : d2s) mine.put_vec(v);
-      std::vector<std::uint64_t> sum(hist_done ? 0 : hist.size(), 0);
+      std::vector<std::uint64_t> sum(gather_hist ? hist.size() : 0, 0);
       std::vector<std::vector<float>> joined(d2.size()), joined_s(d2s.size());
       for (const std::string& m : allgather(comm, mine.bytes)) {
         MessageReader r{m};
-        if (!hist_done)
+        if (gather_hist)
           for (const auto& [cell, n] : r.get_vec<std::array<std::uint64_t, 2>>()) {
             if (cell >= sum.size())
               throw std::logic_error("tiled filter: a histogram cell outside the grid");
@@ -240,7 +245,7 @@ void histogram_and_neighbours(const TiledSource& src, const FilterOptions& o,
             v.insert(v.end(), part.begin(), part.end());
           }
       }
-      if (!hist_done) hist = std::move(sum);
+      if (gather_hist) hist = std::move(sum);
       d2 = std::move(joined);
       d2s = std::move(joined_s);
     }

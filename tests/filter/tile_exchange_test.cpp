@@ -76,13 +76,36 @@ TEST(TileExchange, EveryProcessGetsEveryMessageInRankOrder) {
 
 TEST(TileExchange, AnExchangeWithTooFewMessagesIsRefused) {
   // An exchange that drops the last process's message.
-  TileComm comm{0, 3, [](const std::string& mine) { return mine + mine; }};
+  TileComm comm{0, 3, [](const std::string& mine) { return mine + mine; }, nullptr};
   EXPECT_THROW(allgather(comm, "x"), std::logic_error);
   // One that cuts a message short.
-  TileComm cut{0, 1, nullptr};
+  TileComm cut{0, 1, nullptr, nullptr};
   cut.ranks = 2;
   cut.allgather = [](const std::string& mine) { return mine + mine.substr(0, mine.size() - 1); };
   EXPECT_THROW(allgather(cut, "xyz"), std::logic_error);
+}
+
+TEST(TileExchange, HistogramsAreSummedAsArraysOnlyWhenTheirOccupiedCellsWouldOutweighThem) {
+  // 600 cells; each process occupies `per_rank` of them (16 bytes each when gathered) against
+  // 8 bytes a cell of the array: the arrays win above 300 occupied cells in all.
+  const auto decide = [](int ranks, std::size_t per_rank, bool with_sum) {
+    const std::vector<std::uint8_t> got =
+        test::run_ranks<std::uint8_t>(ranks, [&](const TileComm& comm) {
+          std::vector<std::uint64_t> hist(600, 0);
+          for (std::size_t i = 0; i < per_rank; ++i)  // spread over the grid, one count each
+            hist[(i * 7 + static_cast<std::size_t>(comm.rank)) % hist.size()] = 1 + i % 3;
+          TileComm c = comm;
+          if (!with_sum) c.sum = nullptr;
+          return sum_histograms_as_arrays(c, hist) ? std::uint8_t{1} : std::uint8_t{0};
+        });
+    for (std::uint8_t g : got) EXPECT_EQ(g, got[0]) << "the processes disagree";
+    return got[0] != 0;
+  };
+  EXPECT_FALSE(decide(3, 100, true));   // 300 in all: gathered, 4,800 bytes = the array's
+  EXPECT_TRUE(decide(3, 101, true));    // 303
+  EXPECT_TRUE(decide(2, 600, true));    // every cell on each
+  EXPECT_FALSE(decide(2, 600, false));  // no sum to call
+  EXPECT_FALSE(decide(1, 600, true));   // one process exchanges nothing
 }
 
 TEST(TileExchange, RecordRangesSplitTheRecordsEvenlyInRankOrder) {
@@ -90,7 +113,7 @@ TEST(TileExchange, RecordRangesSplitTheRecordsEvenlyInRankOrder) {
     for (int ranks = 1; ranks <= 7; ++ranks) {
       std::uint64_t next = 0, smallest = records, largest = 0;
       for (int r = 0; r < ranks; ++r) {
-        const auto [b, e] = record_range(records, TileComm{r, ranks, nullptr});
+        const auto [b, e] = record_range(records, TileComm{r, ranks, nullptr, nullptr});
         EXPECT_EQ(b, next) << records << " records, rank " << r << " of " << ranks;
         ASSERT_LE(b, e);
         smallest = std::min(smallest, e - b);

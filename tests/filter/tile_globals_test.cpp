@@ -111,7 +111,7 @@ TEST(TileGlobals, TheArraysPresentAreThoseOfAnyProcesssRecords) {
   fixed.scale = ScaleMode::kFixed;
   fixed.h = 0.1;
   // Only the last process's records (of three) carry colours.
-  const std::uint64_t last_range = record_range(c.size(), TileComm{2, 3, nullptr})[0];
+  const std::uint64_t last_range = record_range(c.size(), TileComm{2, 3, nullptr, nullptr})[0];
   const GlobalPasses g = passes(c, fixed, 3, 5000, last_range);
   EXPECT_TRUE(g.columns.colors);
   EXPECT_FALSE(g.columns.normals);
@@ -119,6 +119,13 @@ TEST(TileGlobals, TheArraysPresentAreThoseOfAnyProcesssRecords) {
   const GlobalPasses none = passes(c, fixed, 3, 5000, c.size());
   EXPECT_FALSE(none.columns.colors);
 }
+
+// One process of a run that counts its messages' bytes and its sums of whole arrays.
+struct RankRun {
+  GlobalPasses g;
+  std::size_t largest_message = 0;
+  int sums = 0;
+};
 
 // Every process receives every process's messages: a histogram travels as its occupied cells,
 // not as the grid's (about 2 million) cells, so that the exchange does not grow each process's
@@ -129,16 +136,16 @@ TEST(TileGlobals, TheHistogramTravelsAsItsOccupiedCells) {
   fixed.scale = ScaleMode::kFixed;
   fixed.h = 0.1;
   const TiledSource src = test::source_of(c);
-  struct Run {
-    GlobalPasses g;
-    std::size_t largest_message = 0;
-  };
-  const std::vector<Run> runs = test::run_ranks<Run>(3, [&](const TileComm& comm) {
-    Run run;
+  const std::vector<RankRun> runs = test::run_ranks<RankRun>(3, [&](const TileComm& comm) {
+    RankRun run;
     TileComm counted = comm;
     counted.allgather = [&](const std::string& mine) {
       run.largest_message = std::max(run.largest_message, mine.size());
       return comm.allgather(mine);
+    };
+    counted.sum = [&](std::vector<std::uint64_t>& counts) {
+      ++run.sums;
+      comm.sum(counts);
     };
     run.g = global_passes(src, fixed, 4.0, record_range(src.records, comm), 5000, counted, nullptr);
     return run;
@@ -147,10 +154,45 @@ TEST(TileGlobals, TheHistogramTravelsAsItsOccupiedCells) {
   std::size_t occupied = 0;
   for (const std::uint64_t n : g.histogram) occupied += n > 0 ? 1 : 0;
   ASSERT_GT(g.histogram.size(), 20 * occupied) << "the scene fills too much of its grid";
-  for (const Run& r : runs) {
+  for (const RankRun& r : runs) {
     EXPECT_EQ(r.g.histogram, g.histogram);
     // At most every occupied cell (16 bytes each) and the first pass's samples (24 bytes each).
     EXPECT_LE(r.largest_message, 16 * occupied + 24 * 10000 + 1024);
+    EXPECT_EQ(r.sums, 0) << "the whole arrays were summed for a sparse histogram";
+  }
+}
+
+// Where every process's records spread over the whole scene and fill much of its grid (a flat
+// floor: 256 x 256 x 2 cells), the occupied cells gathered would outweigh the array: the arrays
+// are summed instead (MPI_Allreduce), once, and give the same counts as one process.
+TEST(TileGlobals, ADenseHistogramIsSummedAsAnArray) {
+  const PointCloud c = test::noisy_plane(150000, 4.0, 0.002, 8);  // records in random places
+  FilterOptions fixed;
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = 0.1;
+  const TiledSource src = test::source_of(c);
+  const GlobalPasses one = passes(c, fixed, 1, 1 << 20);
+  std::size_t occupied = 0;
+  for (const std::uint64_t n : one.histogram) occupied += n > 0 ? 1 : 0;
+  const std::vector<RankRun> runs = test::run_ranks<RankRun>(3, [&](const TileComm& comm) {
+    RankRun run;
+    TileComm counted = comm;
+    counted.allgather = [&](const std::string& mine) {
+      run.largest_message = std::max(run.largest_message, mine.size());
+      return comm.allgather(mine);
+    };
+    counted.sum = [&](std::vector<std::uint64_t>& counts) {
+      ++run.sums;
+      comm.sum(counts);
+    };
+    run.g = global_passes(src, fixed, 4.0, record_range(src.records, comm), 5000, counted, nullptr);
+    return run;
+  });
+  for (const RankRun& r : runs) {
+    EXPECT_EQ(r.g.histogram, one.histogram);
+    EXPECT_EQ(r.sums, 1);
+    // Only the first pass's samples travel by allgather, not the histogram's occupied cells.
+    EXPECT_LT(r.largest_message, 16 * occupied / 3);
   }
 }
 

@@ -293,7 +293,7 @@ TEST(TiledFilter, AFailedProcessRemovesEveryProcesssScratchFiles) {
   bool in_sink0 = false, release0 = false;
   std::size_t left_when_failed = 0;
   std::thread rank0([&] {
-    TileComm comm{0, 2, [&](const std::string& b) { return exchange.allgather(0, b); }};
+    const TileComm comm = exchange.comm(0);
     try {
       tiled_filter(
           source_of(c), {}, scratch.options(4000),
@@ -307,7 +307,7 @@ TEST(TiledFilter, AFailedProcessRemovesEveryProcesssScratchFiles) {
     } catch (const std::exception&) {  // ended by the other's failure, as intended
     }
   });
-  TileComm comm{1, 2, [&](const std::string& b) { return exchange.allgather(1, b); }};
+  const TileComm comm = exchange.comm(1);
   std::size_t sink1 = 0;
   EXPECT_THROW(
       tiled_filter(

@@ -1,13 +1,14 @@
 #pragma once
 // Test support for the tiled filter (tiled_filter.h and filter/src/tile_*.h): a scratch folder,
 // a source that reads an in-memory cloud by record ranges, and processes played by threads of
-// one test that exchange their messages as MPI's allgather would.
+// one test that exchange their messages as MPI's allgather and allreduce (sum) would.
 
 #include <unistd.h>
 
 #include <algorithm>
 #include <condition_variable>
 #include <cstdint>
+#include <cstring>
 #include <exception>
 #include <filesystem>
 #include <functional>
@@ -93,9 +94,25 @@ class RankExchange {
     failed_ = true;
     cv_.notify_all();
   }
+  // As MPI_Allreduce's sum: every rank's counts (of one length), summed in rank order.
+  void sum(int rank, std::vector<std::uint64_t>& counts) {
+    const std::string mine(reinterpret_cast<const char*>(counts.data()),
+                           counts.size() * sizeof(std::uint64_t));
+    const std::string all = allgather(rank, mine);
+    if (all.size() != slot_.size() * mine.size())
+      throw std::logic_error("RankExchange::sum: the ranks' counts differ in length");
+    std::fill(counts.begin(), counts.end(), 0);
+    for (std::size_t r = 0; r < slot_.size(); ++r)
+      for (std::size_t i = 0; i < counts.size(); ++i) {
+        std::uint64_t n;
+        std::memcpy(&n, all.data() + r * mine.size() + i * sizeof n, sizeof n);
+        counts[i] += n;
+      }
+  }
   TileComm comm(int rank) {
     return {rank, static_cast<int>(slot_.size()),
-            [this, rank](const std::string& b) { return allgather(rank, b); }};
+            [this, rank](const std::string& b) { return allgather(rank, b); },
+            [this, rank](std::vector<std::uint64_t>& c) { sum(rank, c); }};
   }
 
  private:

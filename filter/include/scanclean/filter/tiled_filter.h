@@ -71,6 +71,11 @@ struct TileComm {
   //! Every process passes its bytes; every process gets all of them concatenated in rank order.
   //! Null for one process.
   std::function<std::string(const std::string&)> allgather;
+  //! Optional: every process passes counts of the same length and gets, in place, their sums
+  //! over the processes (MPI_Allreduce). The occupancy histogram travels this way when the cells
+  //! the processes occupy, gathered, would outweigh the whole array; without it, or below that,
+  //! through allgather as the occupied cells.
+  std::function<void(std::vector<std::uint64_t>&)> sum;
 };
 
 //! Options of the tiled run. Checked by validate().
