@@ -1,8 +1,12 @@
 // A binary PLY written piece by piece and committed atomically (ply_stream_writer.h).
 #include "scanclean/io/ply_stream_writer.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <bit>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -69,6 +73,7 @@ PlyStreamWriter::PlyStreamWriter(const std::filesystem::path& path, PlyLayout la
   file_ = std::make_unique<AtomicFile>(path_, true);
   const std::string h = header(0);
   header_size_ = h.size();
+  end_ = h.size();
   file_->stream().write(h.data(), static_cast<std::streamsize>(h.size()));
   if (!file_->stream()) throw IoError(path_.string() + ": cannot write the header");
 }
@@ -108,6 +113,54 @@ void PlyStreamWriter::append_encoded(const std::string& records, std::uint64_t p
   file_->stream().write(records.data(), static_cast<std::streamsize>(records.size()));
   if (!file_->stream()) throw IoError(path_.string() + ": write failed (disk full?)");
   points_ += points;
+  end_ += records.size();
+}
+
+std::uint64_t PlyStreamWriter::reserve(std::uint64_t bytes, std::uint64_t points) {
+  if (!file_) throw std::logic_error("PlyStreamWriter: reserve after finish");
+  std::ostream& os = file_->stream();
+  os.flush();
+  if (!os) throw IoError(path_.string() + ": write failed (disk full?)");
+  const std::uint64_t at = end_;
+  std::error_code ec;
+  std::filesystem::resize_file(file_->temporary(), at + bytes, ec);
+  if (ec)
+    throw IoError(path_.string() + ": cannot make room for " + std::to_string(bytes) +
+                  " bytes of points: " + ec.message());
+  os.seekp(static_cast<std::streamoff>(at + bytes));
+  if (!os) throw IoError(path_.string() + ": cannot make room for the points");
+  end_ = at + bytes;
+  points_ += points;
+  return at;
+}
+
+const std::filesystem::path& PlyStreamWriter::temporary() const {
+  if (!file_) throw std::logic_error("PlyStreamWriter: temporary() after finish");
+  return file_->temporary();
+}
+
+void write_at(const std::filesystem::path& file, std::uint64_t offset, const std::string& bytes) {
+  const int fd = ::open(file.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0)
+    throw IoError(file.string() +
+                  ": cannot open to write points in place: " + std::strerror(errno));
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n =
+        ::pwrite(fd, bytes.data() + done, bytes.size() - done, static_cast<off_t>(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const std::string why = n < 0 ? std::strerror(errno) : "nothing written";
+      ::close(fd);
+      throw IoError(file.string() + ": write failed at byte " + std::to_string(offset + done) +
+                    " (disk full?): " + why);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  const bool synced = ::fsync(fd) == 0;
+  const std::string why = synced ? std::string() : std::strerror(errno);
+  if (::close(fd) != 0 || !synced)
+    throw IoError(file.string() + ": cannot sync the points written in place: " + why);
 }
 
 void PlyStreamWriter::finish() {

@@ -49,6 +49,12 @@ class PlyStreamWriter {
   void append(const PointCloud& cloud);
   //! Appends `points` vertex records already encoded by encode_ply_vertices(). \throw IoError.
   void append_encoded(const std::string& records, std::uint64_t points);
+  //! Leaves room at the end for `points` vertex records of `bytes` bytes, which other processes
+  //! write in place (write_at() on temporary()) before finish(); returns the room's offset in
+  //! the file. The points count in the header. \throw IoError.
+  std::uint64_t reserve(std::uint64_t bytes, std::uint64_t points);
+  //! The temporary file the points go to until finish() commits it.
+  const std::filesystem::path& temporary() const;
   std::uint64_t points() const { return points_; }
   const PlyLayout& layout() const { return layout_; }
   //! Rewrites the header with the vertex count and commits the file. \throw IoError.
@@ -61,7 +67,12 @@ class PlyStreamWriter {
   std::string provenance_;
   std::size_t header_size_ = 0;
   std::uint64_t points_ = 0;
+  std::uint64_t end_ = 0;  // bytes in the file, the header included
   std::unique_ptr<AtomicFile> file_;
 };
+
+//! Writes `bytes` at `offset` of the existing `file` (room another process reserved with
+//! PlyStreamWriter::reserve()) and syncs them to the disk. \throw IoError naming the file.
+void write_at(const std::filesystem::path& file, std::uint64_t offset, const std::string& bytes);
 
 }  // namespace scanclean
