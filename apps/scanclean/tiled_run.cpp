@@ -6,11 +6,16 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <optional>
+#include <sstream>
 
 #include "scanclean/core/atomic_file.h"
 #include "scanclean/core/errors.h"
@@ -87,6 +92,82 @@ std::pair<std::uint64_t, std::string> get_block(std::istream& is, const std::fil
   is.read(bytes.data(), static_cast<std::streamsize>(size));
   if (!is) throw IoError(f.string() + ": a tile's result file is incomplete");
   return {points, std::move(bytes)};
+}
+
+// What one tile's result file holds (several processes): the tile, then the points and bytes
+// of its output records and of its outlier records (0 bytes when no outliers file is wanted).
+struct PartSizes {
+  std::uint64_t tile, points, bytes, outlier_points, outlier_bytes;
+};
+
+// Several processes: every process writes its own tiles' results into the outputs, in place,
+// in tile order (the bytes process 0 would have appended), and syncs them; process 0 reserves
+// the room first and commits the files after (finish()). The results do not travel through
+// one process. `out` and `outl` are process 0's writers (null elsewhere, and outl without an
+// outliers file).
+void write_parts_in_place(const TileComm& comm, const std::filesystem::path& scratch,
+                          const std::vector<PartSizes>& mine, PlyStreamWriter* out,
+                          PlyStreamWriter* outl) {
+  // Every process's tiles' sizes, hence each tile's offset in either output.
+  std::string sent(mine.size() * sizeof(PartSizes), '\0');
+  if (!mine.empty()) std::memcpy(sent.data(), mine.data(), sent.size());
+  const std::string all = comm.allgather(sent);
+  if (all.size() % sizeof(PartSizes) != 0)
+    throw std::logic_error("scanclean-mpi: the tiles' sizes came back cut short");
+  std::vector<PartSizes> every(all.size() / sizeof(PartSizes));
+  if (!every.empty()) std::memcpy(static_cast<void*>(every.data()), all.data(), all.size());
+  std::sort(every.begin(), every.end(),
+            [](const PartSizes& a, const PartSizes& b) { return a.tile < b.tile; });
+  std::map<std::uint64_t, std::array<std::uint64_t, 2>> offset;  // tile: output, outliers
+  std::uint64_t bytes = 0, points = 0, obytes = 0, opoints = 0;
+  for (const PartSizes& p : every) {
+    if (!offset.emplace(p.tile, std::array<std::uint64_t, 2>{bytes, obytes}).second)
+      throw std::logic_error("scanclean-mpi: two processes filtered one tile");
+    bytes += p.bytes;
+    points += p.points;
+    obytes += p.outlier_bytes;
+    opoints += p.outlier_points;
+  }
+  // Process 0 makes the room and tells the others where it is (they send nothing): per file,
+  // the room's offset and the temporary file's path (its length first).
+  std::string room;
+  if (comm.rank == 0 && out) {
+    for (PlyStreamWriter* w : {out, outl}) {
+      if (!w) continue;
+      const std::uint64_t at = w == out ? w->reserve(bytes, points) : w->reserve(obytes, opoints);
+      const std::string path = w->temporary().string();
+      room += std::to_string(at) + ' ' + std::to_string(path.size()) + '\n' + path;
+    }
+  }
+  std::vector<std::pair<std::uint64_t, std::filesystem::path>> rooms;
+  {
+    std::istringstream in(comm.allgather(room));
+    std::uint64_t at = 0;
+    std::size_t length = 0;
+    while (in >> at >> length && in.get() == '\n') {
+      std::string path(length, '\0');
+      if (!in.read(path.data(), static_cast<std::streamsize>(length))) break;
+      rooms.emplace_back(at, path);
+    }
+    if (rooms.empty() || rooms.size() > 2)
+      throw std::logic_error("scanclean-mpi: process 0's outputs came back garbled");
+  }
+  for (const PartSizes& p : mine) {
+    const auto f = part_file(scratch, p.tile);
+    std::ifstream is(f, std::ios::binary);
+    if (!is) throw IoError(f.string() + ": a tile's result file is missing");
+    const auto [n, cloud] = get_block(is, f);
+    const auto [m, removed] = get_block(is, f);
+    if (n != p.points || m != p.outlier_points)
+      throw IoError(f.string() + ": a tile's result file holds other points than written");
+    const std::array<std::uint64_t, 2>& at = offset.at(p.tile);
+    write_at(rooms[0].second, rooms[0].first + at[0], cloud);
+    if (rooms.size() > 1) write_at(rooms[1].second, rooms[1].first + at[1], removed);
+    is.close();
+    std::error_code ec;
+    std::filesystem::remove(f, ec);
+  }
+  comm.allgather({});  // every result written and synced
 }
 
 // The attributes of an output as the in-memory filter makes them: the input's (select()), then
@@ -196,6 +277,7 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
         outl = std::make_unique<PlyStreamWriter>(req.outliers, outlier_layout, prov);
     }
   };
+  std::vector<PartSizes> parts;  // this process's tiles' result files (several processes)
   const TileSink sink = [&](std::size_t tile, const PointCloud& c, const PointCloud& o) {
     const std::string cb = encode_ply_vertices(c, cloud_layout);
     const std::string ob = outl || many ? encode_ply_vertices(o, outlier_layout) : std::string();
@@ -206,10 +288,13 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
     }
     const auto f = part_file(t.scratch, tile);
     std::ofstream os(f, std::ios::binary | std::ios::trunc);
+    const std::string none;
+    const std::string& kept_ob = req.outliers.empty() ? none : ob;
     put_block(os, c.size(), cb);
-    put_block(os, o.size(), req.outliers.empty() ? std::string() : ob);
+    put_block(os, o.size(), kept_ob);
     os.close();
     if (!os) throw IoError(f.string() + ": cannot write a tile's result (disk full?)");
+    parts.push_back({tile, c.size(), cb.size(), o.size(), kept_ob.size()});
   };
   result.stats = tiled_filter(src, req.filter, t, sink, req.comm);
   // The stream drops records whose x, y or z is not finite (as the whole-file readers do).
@@ -223,19 +308,9 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
   const auto& st = result.stats;
   const bool collapsed =
       (st.points_out == 0 && st.points_in >= 1) || (st.points_out == 1 && st.points_in >= 2);
+  const auto writing = std::chrono::steady_clock::now();
+  if (many) write_parts_in_place(req.comm, t.scratch, parts, out.get(), outl.get());
   if (rank0 && out) {
-    if (many)
-      for (std::size_t k = 0; k < st.tiles; ++k) {
-        const auto f = part_file(t.scratch, k);
-        std::ifstream is(f, std::ios::binary);
-        if (!is) continue;  // a tile without own points
-        auto [n, bytes] = get_block(is, f);
-        out->append_encoded(bytes, n);
-        auto [m, obytes] = get_block(is, f);
-        if (outl) outl->append_encoded(obytes, m);
-        is.close();
-        std::filesystem::remove(f, ec);
-      }
     if (!collapsed) {
       out->finish();
       if (outl) outl->finish();
@@ -243,6 +318,8 @@ TiledRunResult run_tiled(const TiledRunRequest& req) {
       result.written = true;
     }
   }
+  result.seconds_writing =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - writing).count();
   if (many && req.comm.allgather) req.comm.allgather({});  // outputs committed
   return result;
 }

@@ -2,8 +2,10 @@
 // The tiled, out-of-core filter run on files, shared by `scanclean filter` (one process) and
 // `scanclean-mpi` (many): streams a binary PLY/PCD in, writes the output PLY (and the outliers
 // PLY) tile by tile, and makes them visible together, atomically, at the end. With several
-// processes, each writes its tiles' results to the scratch folder and process 0 joins them in
-// tile order, so that the output is the same bytes for any number of processes.
+// processes, each writes its tiles' results to the scratch folder; at the end process 0
+// reserves room in the outputs for all of them, each process writes its own in place at their
+// offsets in tile order, and process 0 commits the outputs: the same bytes for any number of
+// processes, and no result travels through one process.
 
 #include <cstddef>
 #include <cstdint>
@@ -34,6 +36,9 @@ struct TiledRunResult {
   std::uint64_t records = 0;          //!< records in the input file
   std::uint64_t dropped_invalid = 0;  //!< of them, dropped by the reader (x, y or z not finite)
   bool written = false;               //!< false: collapsed result, nothing written
+  //! Seconds this process spent writing the outputs after the tiles: its tiles' results (with
+  //! several processes, in place) and, on process 0, the headers and the commit.
+  double seconds_writing = 0;
 };
 
 //! Runs it. \throw OptionError, InputError, IoError.

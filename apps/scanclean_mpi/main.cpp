@@ -1,9 +1,10 @@
 // scanclean-mpi: the tiled robust filter (tiled_filter.h) on many processes.
 //   mpirun -np N scanclean-mpi IN.ply -o OUT.ply [filter options]
 // Every process reads its own byte range of the input in every pass; the tiles are shared among
-// the processes (largest first, to the least loaded); process 0 writes the one output, the same
-// bytes for any N, and those of `scanclean filter --tiled` with the same options apart from the
-// provenance comment (which names the command).
+// the processes (largest first, to the least loaded); every process writes its tiles' results
+// into the one output in place, which process 0 commits: the same bytes for any N, and those of
+// `scanclean filter --tiled` with the same options apart from the provenance comment (which
+// names the command).
 
 #include <mpi.h>
 
@@ -124,8 +125,8 @@ int run(int argc, char** argv, int rank, int ranks) {
   const TiledStats& s = r.stats;
   // Per-process figures to process 0, which prints them.
   char line[256];
-  std::snprintf(line, sizeof line, "%d %zu %llu %.3f %.1f\n", rank, s.tiles_here,
-                static_cast<unsigned long long>(s.halo_points), s.seconds_tiles,
+  std::snprintf(line, sizeof line, "%d %zu %llu %.3f %.3f %.1f\n", rank, s.tiles_here,
+                static_cast<unsigned long long>(s.halo_points), s.seconds_tiles, r.seconds_writing,
                 static_cast<double>(s.peak_rss_bytes) / 1048576.0);
   const std::string per_rank = allgather(line);
   if (rank == 0) {
@@ -143,7 +144,7 @@ int run(int argc, char** argv, int rank, int ranks) {
         "points per second",
         static_cast<unsigned long long>(s.seconds_total > 0 ? s.points_in / s.seconds_total : 0));
     sum.print();
-    std::printf("rank tiles halo_points tile_seconds peak_MiB\n%s", per_rank.c_str());
+    std::printf("rank tiles halo_points tile_seconds write_seconds peak_MiB\n%s", per_rank.c_str());
     std::fflush(stdout);
     warn_dropped_invalid(input, r.dropped_invalid);
     if (r.written) warn_if_mostly_unsupported(s.unsupported, s.points_in, s.globals.h);

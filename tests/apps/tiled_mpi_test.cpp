@@ -117,6 +117,13 @@ bool scratch_left(const fs::path& dir) {
   return false;
 }
 
+// Whether dir holds an output's temporary file (core/atomic_file.h: ".<name>.tmp.<pid>.<n>").
+bool temporary_left(const fs::path& dir) {
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().find(".tmp.") != std::string::npos) return true;
+  return false;
+}
+
 // Records with a NaN coordinate are dropped by the stream as by the whole-file readers, and
 // counted: in the summary and in a warning, as the in-memory run counts them. A file of NaN
 // records only is an input error (exit 3), as in memory, not an empty result.
@@ -210,6 +217,9 @@ TEST_F(TiledProgram, MpiRanksWriteTheSameBytesAsOneProcess) {
         << np[1] << " processes: output differs";
     EXPECT_TRUE(without_provenance(test::slurp(removed)) == expected_removed)
         << np[1] << " processes: outliers differ";
+    // Every process wrote its tiles' results into the outputs in place; nothing is left over.
+    EXPECT_FALSE(scratch_left(dir_)) << np[1] << " processes";
+    EXPECT_FALSE(temporary_left(dir_)) << np[1] << " processes";
   }
 }
 
