@@ -127,16 +127,11 @@ struct RankRun {
   int sums = 0;
 };
 
-// Every process receives every process's messages: a histogram travels as its occupied cells,
-// not as the grid's (about 2 million) cells, so that the exchange does not grow each process's
-// memory by 16 MB a process.
-TEST(TileGlobals, TheHistogramTravelsAsItsOccupiedCells) {
-  const PointCloud c = floor_scene(6);
-  FilterOptions fixed;  // no neighbour distances travel with it
-  fixed.scale = ScaleMode::kFixed;
-  fixed.h = 0.1;
+// The passes as `ranks` processes reading 5,000 records at a time, each counting its messages'
+// bytes and its sums of whole arrays.
+std::vector<RankRun> counted_passes(const PointCloud& c, const FilterOptions& o, int ranks) {
   const TiledSource src = test::source_of(c);
-  const std::vector<RankRun> runs = test::run_ranks<RankRun>(3, [&](const TileComm& comm) {
+  return test::run_ranks<RankRun>(ranks, [&](const TileComm& comm) {
     RankRun run;
     TileComm counted = comm;
     counted.allgather = [&](const std::string& mine) {
@@ -147,9 +142,20 @@ TEST(TileGlobals, TheHistogramTravelsAsItsOccupiedCells) {
       ++run.sums;
       comm.sum(counts);
     };
-    run.g = global_passes(src, fixed, 4.0, record_range(src.records, comm), 5000, counted, nullptr);
+    run.g = global_passes(src, o, 4.0, record_range(src.records, comm), 5000, counted, nullptr);
     return run;
   });
+}
+
+// Every process receives every process's messages: a histogram travels as its occupied cells,
+// not as the grid's (about 2 million) cells, so that the exchange does not grow each process's
+// memory by 16 MB a process.
+TEST(TileGlobals, TheHistogramTravelsAsItsOccupiedCells) {
+  const PointCloud c = floor_scene(6);
+  FilterOptions fixed;  // no neighbour distances travel with it
+  fixed.scale = ScaleMode::kFixed;
+  fixed.h = 0.1;
+  const std::vector<RankRun> runs = counted_passes(c, fixed, 3);
   const GlobalPasses& g = runs[0].g;
   std::size_t occupied = 0;
   for (const std::uint64_t n : g.histogram) occupied += n > 0 ? 1 : 0;
@@ -170,24 +176,10 @@ TEST(TileGlobals, ADenseHistogramIsSummedAsAnArray) {
   FilterOptions fixed;
   fixed.scale = ScaleMode::kFixed;
   fixed.h = 0.1;
-  const TiledSource src = test::source_of(c);
   const GlobalPasses one = passes(c, fixed, 1, 1 << 20);
   std::size_t occupied = 0;
   for (const std::uint64_t n : one.histogram) occupied += n > 0 ? 1 : 0;
-  const std::vector<RankRun> runs = test::run_ranks<RankRun>(3, [&](const TileComm& comm) {
-    RankRun run;
-    TileComm counted = comm;
-    counted.allgather = [&](const std::string& mine) {
-      run.largest_message = std::max(run.largest_message, mine.size());
-      return comm.allgather(mine);
-    };
-    counted.sum = [&](std::vector<std::uint64_t>& counts) {
-      ++run.sums;
-      comm.sum(counts);
-    };
-    run.g = global_passes(src, fixed, 4.0, record_range(src.records, comm), 5000, counted, nullptr);
-    return run;
-  });
+  const std::vector<RankRun> runs = counted_passes(c, fixed, 3);
   for (const RankRun& r : runs) {
     EXPECT_EQ(r.g.histogram, one.histogram);
     EXPECT_EQ(r.sums, 1);
