@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
+#include <exception>
 #include <string>
 #include <vector>
 
@@ -78,6 +79,42 @@ void sum(std::vector<std::uint64_t>& counts) {
                   MPI_COMM_WORLD);
 }
 
+// A counter in process 0's memory that every process takes the next value of (TileComm::take:
+// the tiles, one at a time). Made and freed by every process together. Where the network has
+// no atomic operations of its own, a take may wait until process 0 next calls MPI (at most the
+// tile it is filtering).
+class SharedCounter {
+ public:
+  explicit SharedCounter(int rank) {
+    const MPI_Aint bytes = rank == 0 ? sizeof(std::uint64_t) : 0;
+    MPI_Win_allocate(bytes, sizeof(std::uint64_t), MPI_INFO_NULL, MPI_COMM_WORLD, &value_, &win_);
+    if (rank == 0) *value_ = 0;
+    MPI_Barrier(MPI_COMM_WORLD);  // the value set before anyone takes
+    MPI_Win_lock_all(MPI_MODE_NOCHECK, win_);
+  }
+  ~SharedCounter() {
+    // Freeing is collective: after a failure MPI_Abort ends every process instead (the others
+    // may be waiting elsewhere).
+    if (std::uncaught_exceptions() > uncaught_) return;
+    MPI_Win_unlock_all(win_);
+    MPI_Win_free(&win_);
+  }
+  SharedCounter(const SharedCounter&) = delete;
+  SharedCounter& operator=(const SharedCounter&) = delete;
+  std::uint64_t take() {
+    const std::uint64_t one = 1;
+    std::uint64_t got = 0;
+    MPI_Fetch_and_op(&one, &got, MPI_UINT64_T, 0, 0, MPI_SUM, win_);
+    MPI_Win_flush(0, win_);
+    return got;
+  }
+
+ private:
+  MPI_Win win_ = MPI_WIN_NULL;
+  std::uint64_t* value_ = nullptr;
+  int uncaught_ = std::uncaught_exceptions();
+};
+
 int run(int argc, char** argv, int rank, int ranks) {
   using namespace scanclean;
   using namespace scanclean::app;
@@ -121,6 +158,8 @@ int run(int argc, char** argv, int rank, int ranks) {
   req.comm.ranks = ranks;
   req.comm.allgather = allgather;
   req.comm.sum = sum;
+  SharedCounter tiles(rank);
+  req.comm.take = [&tiles] { return tiles.take(); };
   const TiledRunResult r = run_tiled(req);
   const TiledStats& s = r.stats;
   // Per-process figures to process 0, which prints them.

@@ -65,6 +65,15 @@ TileGrid occupancy_grid(const Eigen::AlignedBox3d& box) {
   return g;
 }
 
+std::vector<std::size_t> largest_first(const TilePlan& plan) {
+  std::vector<std::size_t> order(plan.tiles.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return plan.tiles[a].with_halo > plan.tiles[b].with_halo;
+  });
+  return order;
+}
+
 TilePlan plan_tiles(const TileGrid& grid, const std::vector<std::uint64_t>& hist, double halo,
                     std::uint64_t limit, int ranks) {
   TilePlan plan;
@@ -134,12 +143,7 @@ TilePlan plan_tiles(const TileGrid& grid, const std::vector<std::uint64_t>& hist
   }
   // Ranks: the largest tiles first, each to the least loaded rank (deterministic).
   std::vector<std::uint64_t> load(static_cast<std::size_t>(std::max(1, ranks)), 0);
-  std::vector<std::size_t> by_size(plan.tiles.size());
-  std::iota(by_size.begin(), by_size.end(), 0);
-  std::stable_sort(by_size.begin(), by_size.end(), [&](std::size_t a, std::size_t b) {
-    return plan.tiles[a].with_halo > plan.tiles[b].with_halo;
-  });
-  for (std::size_t t : by_size) {
+  for (std::size_t t : largest_first(plan)) {
     const auto r =
         static_cast<std::size_t>(std::min_element(load.begin(), load.end()) - load.begin());
     plan.tiles[t].rank = static_cast<int>(r);

@@ -58,6 +58,9 @@ struct TilePlan {
 TilePlan plan_tiles(const TileGrid& grid, const std::vector<std::uint64_t>& hist, double halo,
                     std::uint64_t limit, int ranks);
 
+//! The plan's tiles, the largest (points with the halo) first; ties in tile order.
+std::vector<std::size_t> largest_first(const TilePlan& plan);
+
 //! The tiles whose box grown by the halo holds a point, found through a coarse grid (cells of
 //! at least the halo) that lists per cell the tiles whose grown boxes meet it.
 class HaloLookup {

@@ -154,7 +154,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   st.seconds_distribute = seconds_since(t_dist);
   sites.reset();
 
-  // Pass 6: the tiles of this process, in tile order, each with the global choices.
+  // Pass 6: the tiles of this process, each with the global choices.
   auto t_tiles = Clock::now();
   FilterOptions to = o;
   to.progress = nullptr;
@@ -166,10 +166,27 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   to.kernel_stride = gl.kernel_stride;
   to.merge_eps = gl.merge_eps;
   to.min_component_size = gl.min_component_size;
-  std::size_t mine_total = 0, mine_done = 0;
+  // With comm.take the processes take the tiles one at a time, largest first, each as it
+  // becomes free: a tile's time is not its points' (density, clutter, the machine's other
+  // work). Else this process filters the tiles the plan gave it, in tile order.
+  const bool taking = comm.ranks > 1 && comm.take;
+  const std::vector<std::size_t> order =
+      taking ? detail::largest_first(plan) : std::vector<std::size_t>{};
+  std::size_t mine_total = 0, mine_done = 0, next = 0;
   for (const auto& e : plan.tiles) mine_total += e.rank == comm.rank ? 1 : 0;
-  for (std::size_t k = 0; k < plan.tiles.size(); ++k) {
-    if (plan.tiles[k].rank != comm.rank) continue;
+  auto next_tile = [&]() -> std::optional<std::size_t> {
+    if (taking) {
+      const std::uint64_t j = comm.take();
+      if (j >= order.size()) return std::nullopt;
+      progress("tiles", static_cast<double>(j) / static_cast<double>(order.size()));
+      return order[static_cast<std::size_t>(j)];
+    }
+    while (next < plan.tiles.size() && plan.tiles[next].rank != comm.rank) ++next;
+    if (next == plan.tiles.size()) return std::nullopt;
+    return next++;
+  };
+  while (const std::optional<std::size_t> taken = next_tile()) {
+    const std::size_t k = *taken;
     PointCloud c;
     std::vector<std::uint64_t> rec;
     for (int r = 0; r < std::max(1, comm.ranks); ++r) {
@@ -209,8 +226,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
         st.unsupported += (static_cast<int>(v) & kFlagUnsupported) ? 1 : 0;
     sink(k, out, outl);
     ++st.tiles_here;
-    progress("tiles", static_cast<double>(++mine_done) /
-                          static_cast<double>(std::max<std::size_t>(1, mine_total)));
+    if (!taking)
+      progress("tiles", static_cast<double>(++mine_done) /
+                            static_cast<double>(std::max<std::size_t>(1, mine_total)));
   }
   st.seconds_tiles = seconds_since(t_tiles);
   // Totals over every process.

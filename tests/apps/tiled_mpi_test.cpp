@@ -37,6 +37,13 @@ class TiledProgram : public ::testing::Test {
   fs::path dir_;
 };
 
+// Whether dir holds an output's temporary file (core/atomic_file.h: ".<name>.tmp.<pid>.<n>").
+bool temporary_left(const fs::path& dir) {
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().find(".tmp.") != std::string::npos) return true;
+  return false;
+}
+
 TEST_F(TiledProgram, FilterTiledWritesEveryPointOnceAcrossTiles) {
   const auto r = test::run_program(
       SCANCLEAN_PROGRAM,
@@ -64,9 +71,10 @@ TEST_F(TiledProgram, FilterTiledWritesEveryPointOnceAcrossTiles) {
   for (double v : out.find_attribute("merge_count")->values) members += v;
   const double accounted = members + static_cast<double>(removed.size());
   EXPECT_NEAR(accounted, 70700.0, 0.002 * 70700.0);
-  // The scratch folder beside the output is gone.
+  // The scratch folder beside the output is gone, and so are the outputs' temporary files.
   for (const auto& e : fs::directory_iterator(dir_))
     EXPECT_EQ(e.path().filename().string().rfind(".scanclean-tiles", 0), std::string::npos);
+  EXPECT_FALSE(temporary_left(dir_));
   // A text output cannot be streamed: refused before any work, exit 2.
   const auto bad = test::run_program(
       SCANCLEAN_PROGRAM,
@@ -114,13 +122,6 @@ std::string summary_value(const std::string& out, const std::string& label) {
 bool scratch_left(const fs::path& dir) {
   for (const auto& e : fs::directory_iterator(dir))
     if (e.path().filename().string().rfind(".scanclean-tiles", 0) == 0) return true;
-  return false;
-}
-
-// Whether dir holds an output's temporary file (core/atomic_file.h: ".<name>.tmp.<pid>.<n>").
-bool temporary_left(const fs::path& dir) {
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().filename().string().find(".tmp.") != std::string::npos) return true;
   return false;
 }
 

@@ -76,11 +76,11 @@ TEST(TileExchange, EveryProcessGetsEveryMessageInRankOrder) {
 
 TEST(TileExchange, AnExchangeWithTooFewMessagesIsRefused) {
   // An exchange that drops the last process's message.
-  TileComm comm{0, 3, [](const std::string& mine) { return mine + mine; }, nullptr};
+  TileComm comm = test::process_of(0, 3);
+  comm.allgather = [](const std::string& mine) { return mine + mine; };
   EXPECT_THROW(allgather(comm, "x"), std::logic_error);
   // One that cuts a message short.
-  TileComm cut{0, 1, nullptr, nullptr};
-  cut.ranks = 2;
+  TileComm cut = test::process_of(0, 2);
   cut.allgather = [](const std::string& mine) { return mine + mine.substr(0, mine.size() - 1); };
   EXPECT_THROW(allgather(cut, "xyz"), std::logic_error);
 }
@@ -113,7 +113,7 @@ TEST(TileExchange, RecordRangesSplitTheRecordsEvenlyInRankOrder) {
     for (int ranks = 1; ranks <= 7; ++ranks) {
       std::uint64_t next = 0, smallest = records, largest = 0;
       for (int r = 0; r < ranks; ++r) {
-        const auto [b, e] = record_range(records, TileComm{r, ranks, nullptr, nullptr});
+        const auto [b, e] = record_range(records, test::process_of(r, ranks));
         EXPECT_EQ(b, next) << records << " records, rank " << r << " of " << ranks;
         ASSERT_LE(b, e);
         smallest = std::min(smallest, e - b);

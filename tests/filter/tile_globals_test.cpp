@@ -111,7 +111,7 @@ TEST(TileGlobals, TheArraysPresentAreThoseOfAnyProcesssRecords) {
   fixed.scale = ScaleMode::kFixed;
   fixed.h = 0.1;
   // Only the last process's records (of three) carry colours.
-  const std::uint64_t last_range = record_range(c.size(), TileComm{2, 3, nullptr, nullptr})[0];
+  const std::uint64_t last_range = record_range(c.size(), test::process_of(2, 3))[0];
   const GlobalPasses g = passes(c, fixed, 3, 5000, last_range);
   EXPECT_TRUE(g.columns.colors);
   EXPECT_FALSE(g.columns.normals);

@@ -165,6 +165,31 @@ TEST(TilePlan, ProcessesGetTheLargestTilesFirstEachToTheLeastLoaded) {
   }
 }
 
+// The order in which processes take tiles as they become free (TileComm::take): every tile
+// once, by decreasing points with the halo, ties in tile order; the first `ranks` of it are
+// the tiles the plan deals first, one to each process.
+TEST(TilePlan, TilesAreTakenLargestFirstTiesInTileOrder) {
+  const Scene s = scene(7);
+  const TilePlan plan = plan_tiles(s.grid, s.hist, 0.6, s.total / 12, 3);
+  const std::vector<std::size_t> order = largest_first(plan);
+  ASSERT_EQ(order.size(), plan.tiles.size());
+  ASSERT_GE(order.size(), 4u);
+  std::vector<std::size_t> sorted = order;
+  std::sort(sorted.begin(), sorted.end());
+  for (std::size_t k = 0; k < sorted.size(); ++k) ASSERT_EQ(sorted[k], k) << "not every tile once";
+  for (std::size_t j = 1; j < order.size(); ++j) {
+    const std::uint64_t a = plan.tiles[order[j - 1]].with_halo, b = plan.tiles[order[j]].with_halo;
+    EXPECT_GE(a, b) << "position " << j;
+    if (a == b) {
+      EXPECT_LT(order[j - 1], order[j]) << "a tie out of tile order at " << j;
+    }
+  }
+  std::vector<int> first_ranks;
+  for (std::size_t j = 0; j < 3; ++j) first_ranks.push_back(plan.tiles[order[j]].rank);
+  std::sort(first_ranks.begin(), first_ranks.end());
+  EXPECT_EQ(first_ranks, (std::vector<int>{0, 1, 2}));
+}
+
 TEST(TilePlan, ALimitAboveTheCloudGivesOneTileAndAHaloLargerThanTheCloudNoCut) {
   const Scene s = scene(7);
   const TilePlan whole = plan_tiles(s.grid, s.hist, 0.6, s.total, 4);

@@ -5,12 +5,15 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <random>
 #include <stdexcept>
@@ -263,6 +266,67 @@ TEST(TiledFilter, AConfidenceOutsideTheUnitIntervalIsRefusedNamingItsRecord) {
       },
       InputError);
   EXPECT_TRUE(fs::is_empty(scratch.path));
+}
+
+// Three processes (threads) that take the tiles as they become free (TileComm::take) or
+// filter the plan's share: every tile is filtered exactly once, and each tile's result is the
+// same as one process's, bit for bit. (The order they are taken in: tile_plan_test.cpp.)
+TEST(TiledFilter, TilesTakenAsProcessesBecomeFreeGiveTheSameResults) {
+  PointCloud c = test::noisy_plane(24000, 8.0, 0.01, 31);
+  test::add_uniform_outliers(c, 300, -4.0, 4.0, 32);
+  c.normals.clear();
+  const ScratchDir scratch("take");
+  struct TileResult {
+    std::size_t tile;
+    PointCloud cloud, outliers;
+  };
+  // Each tile's result over all processes; `taken`: the order the tiles were filtered in.
+  const auto run = [&](int ranks, bool take, std::vector<std::size_t>* taken) {
+    std::mutex m;
+    std::map<std::size_t, TileResult> by_tile;
+    std::size_t duplicates = 0;
+    std::atomic<std::size_t> takes{0};
+    test::run_ranks<int>(ranks, [&](const TileComm& comm) {
+      TileComm used = comm;
+      used.take = take ? std::function<std::uint64_t()>([&, comm] {
+        ++takes;
+        return comm.take();
+      })
+                       : nullptr;
+      tiled_filter(
+          source_of(c), {}, scratch.options(5000),
+          [&](std::size_t k, const PointCloud& a, const PointCloud& b) {
+            const std::lock_guard lock(m);
+            duplicates += by_tile.count(k);
+            by_tile[k] = TileResult{k, a, b};
+            if (taken) taken->push_back(k);
+          },
+          used);
+      return 0;
+    });
+    EXPECT_EQ(duplicates, 0u) << ranks << " processes: a tile filtered twice";
+    // Taking: one take per tile, and one more per process that found none left.
+    EXPECT_EQ(takes.load(), take ? by_tile.size() + static_cast<std::size_t>(ranks) : 0u);
+    return by_tile;
+  };
+  const auto one = run(1, false, nullptr);
+  ASSERT_GE(one.size(), 6u) << "too few tiles to share";
+  std::vector<std::size_t> order;
+  for (const bool take : {false, true}) {
+    SCOPED_TRACE(take ? "taken as free" : "dealt by the plan");
+    const auto three = run(3, take, take ? &order : nullptr);
+    ASSERT_EQ(three.size(), one.size());
+    for (const auto& [k, r] : one) {
+      const TileResult& t = three.at(k);
+      EXPECT_EQ(t.cloud.positions, r.cloud.positions) << "tile " << k;
+      EXPECT_EQ(t.outliers.positions, r.outliers.positions) << "tile " << k;
+      ASSERT_EQ(t.cloud.attributes.size(), r.cloud.attributes.size());
+      for (std::size_t a = 0; a < r.cloud.attributes.size(); ++a)
+        EXPECT_EQ(t.cloud.attributes[a].values, r.cloud.attributes[a].values) << "tile " << k;
+    }
+  }
+  EXPECT_EQ(order.size(), one.size()) << "a tile's sink called twice or never";
+  EXPECT_TRUE(fs::is_empty(scratch.path)) << "scratch files left behind";
 }
 
 // A run that ends by an exception after the distribution (here the sink's, as when the output

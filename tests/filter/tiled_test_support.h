@@ -1,11 +1,13 @@
 #pragma once
 // Test support for the tiled filter (tiled_filter.h and filter/src/tile_*.h): a scratch folder,
 // a source that reads an in-memory cloud by record ranges, and processes played by threads of
-// one test that exchange their messages as MPI's allgather and allreduce (sum) would.
+// one test that exchange their messages as MPI's allgather and allreduce (sum) would, and
+// share a counter as MPI_Fetch_and_op on one would.
 
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <cstring>
@@ -66,6 +68,14 @@ inline TiledSource source_of(const PointCloud& c) {
   return s;
 }
 
+// Process `rank` of `ranks`, without an exchange (for what needs only the numbers).
+inline TileComm process_of(int rank, int ranks) {
+  TileComm comm;
+  comm.rank = rank;
+  comm.ranks = ranks;
+  return comm;
+}
+
 // The exchange of `ranks` processes played by threads: each allgather(rank, bytes) waits for
 // every rank's call and returns their bytes concatenated in rank order. fail() ends every
 // waiting and later call with an exception, as a process that MPI aborts.
@@ -109,10 +119,13 @@ class RankExchange {
         counts[i] += n;
       }
   }
+  // As MPI_Fetch_and_op on a counter: the next value, to one caller.
+  std::uint64_t take() { return taken_.fetch_add(1); }
   TileComm comm(int rank) {
     return {rank, static_cast<int>(slot_.size()),
             [this, rank](const std::string& b) { return allgather(rank, b); },
-            [this, rank](std::vector<std::uint64_t>& c) { sum(rank, c); }};
+            [this, rank](std::vector<std::uint64_t>& c) { sum(rank, c); },
+            [this] { return take(); }};
   }
 
  private:
@@ -122,6 +135,7 @@ class RankExchange {
   std::string joined_;
   int arrived_ = 0, generation_ = 0;
   bool failed_ = false;
+  std::atomic<std::uint64_t> taken_{0};
 };
 
 // Runs f(comm) as each of `ranks` processes, one thread each, and returns their results in rank

@@ -76,6 +76,12 @@ struct TileComm {
   //! the processes occupy, gathered, would outweigh the whole array; without it, or below that,
   //! through allgather as the occupied cells.
   std::function<void(std::vector<std::uint64_t>&)> sum;
+  //! Optional: a counter the processes share, from 0 for each run (MPI_Fetch_and_op on process
+  //! 0's memory): each call returns the next value to exactly one caller. With it, the
+  //! processes take the tiles one at a time, largest first, each as it becomes free; without
+  //! it, the plan deals them out beforehand (largest first, to the least loaded). Either way the
+  //! results are the same; only which process filters which tile differs.
+  std::function<std::uint64_t()> take;
 };
 
 //! Options of the tiled run. Checked by validate().
@@ -137,8 +143,10 @@ struct TiledStats {
   std::size_t peak_rss_bytes = 0;
 };
 
-//! Receives the result of each tile this process filters, in tile order: the output points and
-//! the removed points whose seeds lie in the tile's own box (source_index = record number).
+//! Receives the result of each tile this process filters: the output points and the removed
+//! points whose seeds lie in the tile's own box (source_index = record number). In tile order,
+//! except when the processes take the tiles as they become free (TileComm::take: largest
+//! first).
 using TileSink =
     std::function<void(std::size_t tile, const PointCloud& cloud, const PointCloud& outliers)>;
 
