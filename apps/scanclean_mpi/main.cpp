@@ -1,10 +1,10 @@
 // scanclean-mpi: the tiled robust filter (tiled_filter.h) on many processes.
 //   mpirun -np N scanclean-mpi IN.ply -o OUT.ply [filter options]
-// Every process reads its own byte range of the input in every pass; the tiles are shared among
-// the processes (largest first, to the least loaded); every process writes its tiles' results
-// into the one output in place, which process 0 commits: the same bytes for any N, and those of
-// `scanclean filter --tiled` with the same options apart from the provenance comment (which
-// names the command).
+// Every process reads its own byte range of the input in every pass; the processes take the
+// tiles one at a time, largest first, as each becomes free; every process writes its tiles'
+// results into the one output in place, which process 0 commits: the same bytes for any N, and
+// those of `scanclean filter --tiled` with the same options apart from the provenance comment
+// (which names the command).
 
 #include <mpi.h>
 
