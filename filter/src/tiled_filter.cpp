@@ -230,6 +230,7 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
       progress("tiles", static_cast<double>(++mine_done) /
                             static_cast<double>(std::max<std::size_t>(1, mine_total)));
   }
+  if (taking) progress("tiles", 1.0);  // every tile taken
   st.seconds_tiles = seconds_since(t_tiles);
   // Totals over every process.
   if (comm.ranks > 1) {
