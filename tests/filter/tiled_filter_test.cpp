@@ -272,8 +272,8 @@ TEST(TiledFilter, AConfidenceOutsideTheUnitIntervalIsRefusedNamingItsRecord) {
 // filter the plan's share: every tile is filtered exactly once, and each tile's result is the
 // same as one process's, bit for bit. (The order they are taken in: tile_plan_test.cpp.)
 TEST(TiledFilter, TilesTakenAsProcessesBecomeFreeGiveTheSameResults) {
-  PointCloud c = test::noisy_plane(24000, 8.0, 0.01, 31);
-  test::add_uniform_outliers(c, 300, -4.0, 4.0, 32);
+  PointCloud c = test::noisy_plane(10000, 6.0, 0.01, 31);
+  test::add_uniform_outliers(c, 100, -3.0, 3.0, 32);
   c.normals.clear();
   const ScratchDir scratch("take");
   struct TileResult {
@@ -294,7 +294,7 @@ TEST(TiledFilter, TilesTakenAsProcessesBecomeFreeGiveTheSameResults) {
       })
                        : nullptr;
       tiled_filter(
-          source_of(c), {}, scratch.options(5000),
+          source_of(c), {}, scratch.options(2500),
           [&](std::size_t k, const PointCloud& a, const PointCloud& b) {
             const std::lock_guard lock(m);
             duplicates += by_tile.count(k);
