@@ -172,8 +172,9 @@ TiledStats tiled_filter(const TiledSource& src, const FilterOptions& o, const Ti
   const bool taking = comm.ranks > 1 && comm.take;
   const std::vector<std::size_t> order =
       taking ? detail::largest_first(plan) : std::vector<std::size_t>{};
-  std::size_t mine_total = 0, mine_done = 0, next = 0;
-  for (const auto& e : plan.tiles) mine_total += e.rank == comm.rank ? 1 : 0;
+  std::size_t mine_total = 0, mine_done = 0, next = 0;  // (the plan's share)
+  if (!taking)
+    for (const auto& e : plan.tiles) mine_total += e.rank == comm.rank ? 1 : 0;
   auto next_tile = [&]() -> std::optional<std::size_t> {
     if (taking) {
       const std::uint64_t j = comm.take();
