@@ -4,7 +4,6 @@
 #include "scanclean/io/ply_stream_writer.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <string>
@@ -12,6 +11,7 @@
 
 #include "io_test_util.h"
 #include "scanclean/io/ply.h"
+#include "support/data_paths.h"
 
 namespace scanclean {
 namespace {
@@ -20,10 +20,7 @@ namespace fs = std::filesystem;
 
 class PlyStreamWriterTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("scanclean_ply_stream_" + std::to_string(::getpid()));
-    fs::create_directories(dir_);
-  }
+  void SetUp() override { dir_ = test::make_temp_dir("ply_stream"); }
   void TearDown() override { fs::remove_all(dir_); }
   // Points [b, e) of c.
   static PointCloud piece(const PointCloud& c, std::size_t b, std::size_t e) {
